@@ -1,0 +1,191 @@
+"""Staged feedback on orientation and convex-hull answers, shared by public and hidden checks.
+
+Everything here is bookkeeping on indices: the caller supplies the expected
+hull and the *boundary walk* (every distinct pin on the hull's boundary, in
+counter-clockwise order from the expected start), so no geometry happens here.
+
+A hull check calls :func:`grade_hull`; it returns when the answer is right, ends the
+check with partial credit when the answer describes the right rubber band but
+breaks a convention, and raises ``CheckFailure`` when the band is wrong.
+Shape of the feedback: type, then range, then which pins, then their order.
+An orientation check calls :func:`judge_turn` for each triple.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from autograder.compare import (
+    CheckFailure,
+    expect_array,
+    expect_int,
+    is_rotation_reversed,
+    same_cycle,
+)
+
+#: fraction of a check's points kept for each convention broken (multiplied together)
+FRACTIONS = {
+    "closed": 0.75,     # first index repeated at the end
+    "start": 0.75,      # right cycle, another starting corner
+    "clockwise": 0.5,   # right cycle, walked the other way round
+    "collinear": 0.5,   # pins in the middle of an edge kept as corners
+}
+
+NAME = "convex_hull(points)"
+
+
+def canonical_indices(points: np.ndarray) -> np.ndarray:
+    """For each pin, the smallest index of a pin at exactly the same place."""
+    first: dict[tuple[float, float], int] = {}
+    return np.array([first.setdefault((float(x), float(y)), i)
+                     for i, (x, y) in enumerate(np.asarray(points, dtype=float))], dtype=int)
+
+
+def _at(points: np.ndarray, i: int) -> str:
+    return f"point {i} at {show_point(points[i])}"
+
+
+def _as_indices(got: Any, n: int) -> list[int]:
+    """The answer as a list of valid row indices, or a CheckFailure saying what is wrong."""
+    if isinstance(got, (list, tuple, np.ndarray)) and len(got) == 0:
+        raise CheckFailure(f"{NAME} returned an empty list; every set of pins has at least "
+                           "one hull corner.")
+    arr = expect_array(got, shape=(None,), dtype_kind="iu", name=NAME)
+    bad = [int(i) for i in arr if not 0 <= int(i) < n]
+    if bad:
+        raise CheckFailure(f"{NAME} returned index {bad[0]}, which is not a row of `points`: "
+                           f"there are {n} pins, so indices run from 0 to {n - 1}.")
+    return [int(i) for i in arr]
+
+
+def _collapse_repeats(walk: list[int]) -> list[int]:
+    """Drop a pin that follows itself (cyclically): [a, a, b] -> [a, b]."""
+    if len(walk) <= 1:
+        return walk
+    return [v for k, v in enumerate(walk) if v != walk[k - 1]] or walk[:1]
+
+
+def judge_hull(got: Any, points: np.ndarray, expected: Sequence[int],
+               boundary: Sequence[int]) -> tuple[float, str]:
+    """Return ``(fraction, message)`` for a hull answer; raise CheckFailure when it is wrong.
+
+    ``expected`` is the hull in canonical indices (counter-clockwise from the
+    lexicographically smallest pin); ``boundary`` lists every distinct pin on
+    the hull's boundary in the same order (corners and pins on edges).
+    """
+    points = np.asarray(points, dtype=float)
+    canon = canonical_indices(points)
+    hull = _as_indices(got, len(points))
+    walk = [int(canon[i]) for i in hull]
+    issues: dict[str, str] = {}
+
+    if len(walk) > 1 and walk[-1] == walk[0]:
+        issues["closed"] = (f"your list ends with its first corner again (index {hull[-1]}); "
+                            "list each corner once, the band closes by itself")
+        walk = walk[:-1]
+    collapsed = _collapse_repeats(walk)
+    if len(collapsed) < len(walk):
+        issues["collinear"] = ("your list names the same place twice in a row (pins at "
+                               "exactly the same place count once)")
+    expected = [int(canon[v]) for v in expected]
+    boundary = [int(canon[v]) for v in boundary]
+    on_boundary = set(boundary)
+    _check_pins(collapsed, expected, on_boundary, points, len(hull))
+
+    extra = list(dict.fromkeys(v for v in collapsed if v not in set(expected)))
+    if extra:
+        issues["collinear"] = (f"your hull keeps {_at(points, extra[0])}, which lies on a hull "
+                               "edge without being a corner; when pins are collinear keep only "
+                               "the farthest" + (f" ({len(extra)} such pins)" if len(extra) > 1
+                                                  else ""))
+    if len(expected) > 2:
+        _check_order(collapsed, [v for v in boundary if v in set(collapsed)], points, issues)
+    elif not extra and len(expected) == 2 and collapsed[0] != expected[0]:
+        issues["start"] = (f"start at the lexicographically smallest point (index "
+                           f"{expected[0]}): smallest x, then smallest y")
+
+    fraction = float(np.prod([FRACTIONS[k] for k in issues])) if issues else 1.0
+    message = "; ".join(issues.values())
+    return fraction, (message[:1].upper() + message[1:] + "." if message else "")
+
+
+def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int],
+                points: np.ndarray, got_len: int) -> None:
+    """Fail when a corner is missing, a pin is off the band, or a pin comes twice."""
+    seen = set(collapsed)
+    missing = [v for v in expected if v not in seen]
+    inside = [v for v in collapsed if v not in on_boundary]
+    parts = []
+    if missing:
+        parts.append(f"{_at(points, missing[0])} is on the hull but missing"
+                     + (f" ({len(missing)} corners are missing)" if len(missing) > 1 else ""))
+    if inside:
+        parts.append(f"{_at(points, inside[0])} is not on the hull's boundary, so it is not "
+                     "a corner" + (f" ({len(inside)} such pins)" if len(inside) > 1 else ""))
+    if parts:
+        raise CheckFailure(f"Expected {len(expected)} hull vertices, got {got_len}; "
+                           + "; ".join(parts) + ".")
+    twice = next((v for v in collapsed if collapsed.count(v) > 1), None)
+    if twice is not None and len(expected) > 2:
+        raise CheckFailure(f"{_at(points, twice)} appears {collapsed.count(twice)} times in "
+                           "your hull; the band passes each corner once.")
+
+
+def _check_order(collapsed: list[int], order: list[int], points: np.ndarray,
+                 issues: dict[str, str]) -> None:
+    """Compare the order with the counter-clockwise boundary walk restricted to the same pins."""
+    if collapsed == order:
+        return
+    if same_cycle(collapsed, order):
+        issues["start"] = (f"start at the lexicographically smallest point (index {order[0]}): "
+                           "smallest x, then smallest y")
+        return
+    if is_rotation_reversed(collapsed, order):
+        issues["clockwise"] = ("your hull is correct but clockwise: list the vertices "
+                               "counter-clockwise (left turns)")
+        if collapsed[0] != order[0]:
+            issues["start"] = (f"start at the lexicographically smallest point (index "
+                               f"{order[0]}): smallest x, then smallest y")
+        return
+    k = collapsed.index(order[0])
+    walk = collapsed[k:] + collapsed[:k]
+    step = next(i for i in range(1, len(order)) if walk[i] != order[i])
+    raise CheckFailure(
+        f"Your hull has the right corners but not in order around the band: after "
+        f"{_at(points, walk[step - 1])} the next one counter-clockwise is "
+        f"{_at(points, order[step])}, not {_at(points, walk[step])}.")
+
+
+def grade_hull(got: Any, points: np.ndarray, expected: Sequence[int],
+               boundary: Sequence[int], credit: Any) -> None:
+    """Judge the answer and end the check: pass, ``credit.partial(...)``, or CheckFailure."""
+    fraction, message = judge_hull(got, points, expected, boundary)
+    if fraction < 1.0:
+        credit.partial(fraction, message)
+
+
+TURN_WORDS = {1: "a left turn (counter-clockwise)", -1: "a right turn (clockwise)",
+              0: "no turn (they are collinear)"}
+
+
+def show_point(p: Any) -> str:
+    """A point written so that pasting it back gives exactly the same floats."""
+    return "(" + ", ".join(_show_number(float(c)) for c in p) + ")"
+
+
+def _show_number(c: float) -> str:
+    return repr(int(c)) if c.is_integer() and abs(c) < 2.0**53 else repr(c)
+
+
+def judge_turn(got: Any, p: Any, q: Any, r: Any, expected: int, *, hint: str = "") -> None:
+    """Raise CheckFailure unless ``got`` is the integer ``expected`` (+1, -1 or 0)."""
+    call = f"orientation({show_point(p)}, {show_point(q)}, {show_point(r)})"
+    value = expect_int(got, name=call)
+    if value not in (-1, 0, 1):
+        raise CheckFailure(f"{call} returned {value}; return only the sign of the "
+                           "determinant: +1, -1 or 0.")
+    if value != expected:
+        raise CheckFailure(f"{call} returned {value:+d}; expected {expected:+d}: the points "
+                           f"make {TURN_WORDS[expected]}." + (f" {hint}" if hint else ""))

@@ -1,0 +1,92 @@
+"""Public checks for the convex-hull assignment: small pin sets and ``data/pins.csv``.
+
+Run them with ``autograder check hull.ipynb``. The graded checks use more and
+harder point sets than these (larger, nearly collinear, and unseen layouts).
+The answers here are small enough to verify by hand on squared paper.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+
+def _load_feedback():
+    """The shared feedback module beside this file (works whatever pytest's import mode)."""
+    path = Path(__file__).with_name("hull_feedback.py")
+    spec = importlib.util.spec_from_file_location("hull_checks_feedback", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+feedback = _load_feedback()
+
+PINS_CSV = Path(__file__).resolve().parents[2] / "data" / "pins.csv"
+
+#: (p, q, r, sign of the turn p -> q -> r); all exact, no tolerance involved
+TURNS = {
+    "turns": [
+        ((0, 0), (1, 0), (0, 1), 1),
+        ((0, 0), (0, 1), (1, 0), -1),
+        ((1, 1), (4, 2), (2, 5), 1),
+        ((-2.5, 3.0), (0.0, 0.0), (5.0, -1.0), 1),
+        ((3, 3), (5, 1), (1, 0), -1),
+    ],
+    "collinear": [
+        ((0, 0), (1, 1), (3, 3), 0),
+        ((2, 0), (0, 0), (1, 0), 0),            # r between p and q
+        ((1, 2), (1, 2), (5, -3), 0),           # two equal points
+        ((0.1, 0.2), (0.3, 0.6), (0.7, 1.4), 0),  # y = 2x holds exactly for these doubles
+        ((-1.0, 4.0), (-1.0, -2.5), (-1.0, 7.25), 0),
+    ],
+}
+
+#: name -> (points, expected hull, every pin on the boundary in counter-clockwise order)
+HULLS = {
+    "square-with-interior": (
+        [[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]],
+        [0, 1, 2, 3], [0, 1, 2, 3]),
+    "worked-example": (
+        [[2, 1], [4, 0], [0, 0], [2, 0], [1, 3]],
+        [2, 1, 4], [2, 3, 1, 4]),
+    "rectangle-edge-pins": (
+        [[4, 2], [2, 0], [0, 2], [2, 1], [0, 0], [4, 0], [2, 2], [0, 1]],
+        [4, 5, 0, 2], [4, 1, 5, 0, 6, 2, 7]),
+    "single-pin": (
+        [[3, 1]],
+        [0], [0]),
+    "collinear-pins": (
+        [[2, 2], [0, 0], [3, 3], [1, 1]],
+        [1, 2], [1, 3, 0, 2]),
+}
+
+#: the hull of data/pins.csv, and its boundary (pins 1 and 15 lie on edges)
+PINS_HULL = [12, 5, 4, 7, 14, 26, 8, 28]
+PINS_BOUNDARY = [12, 5, 4, 1, 7, 14, 26, 15, 8, 28]
+
+
+@pytest.mark.points(1)
+@pytest.mark.parametrize("case", list(TURNS))
+def test_orientation_small(student, case):
+    for p, q, r, expected in TURNS[case]:
+        feedback.judge_turn(student.orientation(p, q, r), p, q, r, expected)
+
+
+@pytest.mark.points(1)
+@pytest.mark.parametrize("case", list(HULLS))
+def test_convex_hull_small(student, credit, case):
+    raw, expected, boundary = HULLS[case]
+    points = np.array(raw, dtype=float)
+    got = student.convex_hull(points)
+    feedback.grade_hull(got, points, expected, boundary, credit)
+
+
+@pytest.mark.points(2)
+def test_convex_hull_pins(student, credit):
+    points = np.loadtxt(PINS_CSV, delimiter=",", skiprows=1)
+    got = student.convex_hull(points)
+    feedback.grade_hull(got, points, PINS_HULL, PINS_BOUNDARY, credit)

@@ -1,0 +1,139 @@
+"""Command line: arguments only. Every decision lives in :mod:`autograder.api`."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import Sequence
+
+from autograder import api
+from autograder.errors import AutograderError, UsageError
+from autograder.grading import GradingOptions
+from autograder.results import SubmissionResult
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="autograder",
+        description="Release, grade and check notebook assignments in a sandboxed worker.")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    rel = commands.add_parser("release", help="write the student version of an assignment")
+    rel.add_argument("assignment", help="a folder name under assignments/ or a path to one")
+    rel.add_argument("--out", type=Path, required=True, help="folder to write the student version to")
+
+    grd = commands.add_parser("grade", help="grade submitted notebooks with every check")
+    grd.add_argument("assignment", help="a folder name under assignments/ or a path to one")
+    grd.add_argument("submissions", nargs="+", type=Path, help="notebooks, or folders of notebooks")
+    grd.add_argument("--out", type=Path, required=True, help="folder for results.json files and grades.csv")
+    grd.add_argument("--jobs", type=_positive_int, default=None,
+                     help=f"submissions graded in parallel (default: number of cores, {os.cpu_count()})")
+    _timing_options(grd)
+    grd.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+
+    chk = commands.add_parser("check", help="run the public checks on your notebook before submitting")
+    chk.add_argument("notebook", type=Path, help="your notebook")
+    chk.add_argument("--assignment", default=None,
+                     help="assignment name or folder (default: the folder the notebook is in)")
+    _timing_options(chk)
+    return parser
+
+
+def _timing_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--timeout", type=_positive_float, default=None,
+                        help="seconds the whole notebook may run (default: the assignment's)")
+    parser.add_argument("--call-timeout", type=_positive_float, default=None,
+                        help="seconds each call into the student's code may take (default: the assignment's)")
+
+
+def _options(args: argparse.Namespace) -> GradingOptions:
+    return GradingOptions(notebook_timeout=args.timeout, call_timeout=args.call_timeout)
+
+
+def _grade(args: argparse.Namespace) -> int:
+    report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
+                       options=_options(args), progress=False if args.no_progress else None)
+    results = report.results
+    scores = [r.score / r.max_score for r in results if r.max_score]
+    mean = 100 * sum(scores) / len(scores) if scores else 0.0
+    outcomes: dict[str, int] = {}
+    for r in results:
+        outcomes[r.outcome] = outcomes.get(r.outcome, 0) + 1
+    print(f"Graded {report.graded} submission(s), reused {report.reused} unchanged result(s) "
+          f"in {report.seconds:.1f} s; mean score {mean:.1f}%.")
+    print("Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
+    print(f"Results: {args.out / 'grades.csv'} and {args.out}/<id>/results.json")
+    for failed in report.failed:
+        print(f"error: the grader failed on {failed.source}: {failed.output}", file=sys.stderr)
+    return 1 if report.failed else 0
+
+
+def format_check(result: SubmissionResult) -> str:
+    """The student-facing text of ``autograder check``."""
+    lines = [result.output, ""]
+    for test in result.tests:
+        mark = "PASS" if test.status == "passed" else "FAIL"
+        lines.append(f"  {mark}  {test.name:<44} {test.score:g}/{test.max_score:g}")
+        if test.output:
+            lines += ["        " + line for line in test.output.splitlines()[:30]]
+    for err in result.cell_errors:
+        lines.append(f"  cell {err.cell + 1} raised {err.ename}: {err.evalue[:200]}")
+    lines += ["", f"Public checks: {result.score:g}/{result.max_score:g} points. "
+              "Hidden checks run when your notebook is graded."]
+    return "\n".join(lines)
+
+
+def _check(args: argparse.Namespace) -> int:
+    result = api.check(args.notebook, assignment=args.assignment, options=_options(args))
+    print(format_check(result))
+    return 0 if result.score >= result.max_score else 1
+
+
+def _release(args: argparse.Namespace) -> int:
+    path = api.release(args.assignment, out=args.out)
+    print(f"Wrote the student version to {path.parent} (notebook: {path.name}).")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handlers = {"release": _release, "grade": _grade, "check": _check}
+    try:
+        return handlers[args.command](args)
+    except UsageError as exc:
+        print(f"autograder {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except AutograderError as exc:
+        print(f"autograder {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("autograder: interrupted; results written so far are kept, run again to resume.",
+              file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,146 @@
+"""Staged comparisons for check authors: type, then shape, then values, then where.
+
+Each helper raises :class:`~autograder.errors.CheckFailure` with a message a
+student can act on ("expected X, got Y, at Z"), computed from the data and
+never from the check's source.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from autograder.errors import CheckFailure
+
+__all__ = [
+    "describe",
+    "expect_array",
+    "expect_close",
+    "expect_equal",
+    "expect_int",
+    "same_cycle",
+    "is_rotation_reversed",
+]
+
+_KIND_WORDS = {"b": "booleans", "i": "integers", "u": "integers", "f": "real numbers",
+               "c": "complex numbers"}
+
+
+def describe(value: Any) -> str:
+    """A short, safe description of a decoded value ("a list of 5 items", "an array (3, 2)")."""
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} and dtype {value.dtype}"
+    if isinstance(value, (list, tuple)):
+        return f"a {type(value).__name__} of {len(value)} item(s)"
+    if value is None:
+        return "None (did you forget `return`?)"
+    return f"a {type(value).__name__} ({_short(value)})"
+
+
+def _short(value: Any, width: int = 80) -> str:
+    text = repr(value)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def expect_array(got: Any, *, shape: Sequence[int | None] | None = None,
+                 dtype_kind: str = "biuf", name: str = "the result") -> NDArray[Any]:
+    """Return ``got`` as an array, checking its element kind and shape.
+
+    ``shape`` may hold ``None`` for any length in that dimension.
+    """
+    if got is None or isinstance(got, (str, bytes, dict)):
+        raise CheckFailure(f"{name} should be an array-like of {_kinds(dtype_kind)}; "
+                           f"got {describe(got)}.")
+    try:
+        arr = np.asarray(got)
+    except (ValueError, TypeError):
+        raise CheckFailure(f"{name} should be a rectangular array-like; got {describe(got)}.") from None
+    if arr.dtype.kind not in dtype_kind:
+        raise CheckFailure(f"{name} should hold {_kinds(dtype_kind)}; got {describe(got)}.")
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(w is None or w == n for w, n in zip(shape, arr.shape))
+        if not ok:
+            want = "(" + ", ".join("any" if w is None else str(w) for w in shape) + ")"
+            raise CheckFailure(f"{name} should have shape {want}; got shape {arr.shape}.")
+    return arr
+
+
+def _kinds(dtype_kind: str) -> str:
+    words = dict.fromkeys(_KIND_WORDS[k] for k in dtype_kind if k in _KIND_WORDS)
+    return " or ".join(words) or "numbers"
+
+
+def expect_int(got: Any, *, name: str = "the result") -> int:
+    """Return ``got`` as a Python int (bools and floats with a fraction are refused)."""
+    if isinstance(got, np.ndarray) and got.ndim == 0:
+        got = got.item()
+    if isinstance(got, bool) or not isinstance(got, (int, np.integer, float)):
+        raise CheckFailure(f"{name} should be an integer; got {describe(got)}.")
+    if isinstance(got, float) and not got.is_integer():
+        raise CheckFailure(f"{name} should be an integer; got {got!r}.")
+    return int(got)
+
+
+def expect_close(got: Any, expected: Any, *, rtol: float, atol: float,
+                 name: str = "the result") -> NDArray[Any]:
+    """Check ``got`` against ``expected`` elementwise within ``atol + rtol * |expected|``."""
+    want = np.asarray(expected)
+    arr = expect_array(got, shape=want.shape, dtype_kind="biufc", name=name)
+    bad_nan = np.isnan(arr) & ~np.isnan(want)
+    if bad_nan.any():
+        where = tuple(int(i) for i in np.argwhere(bad_nan)[0])
+        raise CheckFailure(f"{name} has NaN at index {_index(where)} where "
+                           f"{float(want[where]):.6g} was expected.")
+    err = np.abs(arr.astype(complex if arr.dtype.kind == "c" else float) - want)
+    bound = atol + rtol * np.abs(want)
+    over = err > bound
+    if over.any():
+        where = tuple(int(i) for i in np.unravel_index(np.argmax(err - bound), err.shape)) \
+            if err.ndim else ()
+        g, w = arr[where], want[where]
+        raise CheckFailure(
+            f"{name} is off at index {_index(where)}: expected {w:.10g}, got {g:.10g} "
+            f"(error {float(err[where]):.2e}, allowed {float(bound[where]):.2e}); "
+            f"{int(over.sum())} of {over.size} value(s) are outside the tolerance.")
+    return arr
+
+
+def _index(where: tuple[int, ...]) -> str:
+    return "[" + ", ".join(map(str, where)) + "]" if where else "(scalar)"
+
+
+def expect_equal(got: Any, expected: Any, *, name: str = "the result") -> None:
+    """Check exact equality of plain values or integer/boolean arrays."""
+    if isinstance(expected, np.ndarray) or isinstance(got, np.ndarray):
+        want = np.asarray(expected)
+        arr = expect_array(got, shape=want.shape, dtype_kind="biuf", name=name)
+        diff = arr != want
+        if diff.any():
+            where = tuple(int(i) for i in np.argwhere(diff)[0])
+            raise CheckFailure(f"{name} differs at index {_index(where)}: expected "
+                               f"{want[where]!r}, got {arr[where]!r}.")
+        return
+    if type(got) is bool or type(expected) is bool:
+        same = type(got) is type(expected) and got == expected
+    else:
+        same = got == expected
+    if not same:
+        raise CheckFailure(f"{name}: expected {_short(expected)}, got {describe(got)}.")
+
+
+def same_cycle(got: Sequence[int], expected: Sequence[int]) -> bool:
+    """Whether ``got`` is ``expected`` read from another starting vertex."""
+    g, e = [int(x) for x in got], [int(x) for x in expected]
+    if len(g) != len(e):
+        return False
+    if not e:
+        return True
+    doubled = e + e
+    return any(doubled[k:k + len(g)] == g for k in range(len(e)))
+
+
+def is_rotation_reversed(got: Sequence[int], expected: Sequence[int]) -> bool:
+    """Whether ``got`` is ``expected`` traversed the other way round."""
+    return same_cycle(list(got)[::-1], expected)

@@ -1,0 +1,255 @@
+"""Grade one submission: the unit of work (one notebook in, one result out).
+
+:class:`Grader` keeps a warm worker slot and the imported checks between
+submissions, so a batch engine (ours in :mod:`autograder.batch`, or a
+distributed one later) only has to call :meth:`Grader.grade` per file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Sequence
+
+import pytest
+
+import autograder
+from autograder import staticscan
+from autograder.assignment import Assignment
+from autograder.errors import AssignmentError, NotebookError, WorkerCrashed
+from autograder.notebook import Notebook, read_notebook
+from autograder.plugin import CheckContext, GradingPlugin
+from autograder.report import write_result
+from autograder.results import CellError, CheckResult, SubmissionResult
+from autograder.sandbox import IsolationPolicy, Limits
+from autograder.session import RunReport, StudentSession, WorkerSlot
+
+#: bump when a change to the engine can change a score (part of every result's key)
+ENGINE_VERSION = f"autograder-{autograder.__version__}"
+
+
+@dataclass(frozen=True)
+class GradingOptions:
+    """How to grade; every field has a safe default (all isolation on)."""
+
+    policy: IsolationPolicy = field(default_factory=IsolationPolicy)
+    notebook_timeout: float | None = None
+    call_timeout: float | None = None
+    public_only: bool = False
+    max_notebook_bytes: int = 20 * 1024 * 1024
+
+    def digest(self) -> str:
+        return hashlib.sha256(repr((self.public_only, self.notebook_timeout,
+                                    self.call_timeout)).encode()).hexdigest()[:16]
+
+
+def policy_for(assignment: Assignment, options: GradingOptions) -> IsolationPolicy:
+    """The options' policy with the assignment's limit overrides applied."""
+    overrides = dict(assignment.limits)
+    if not overrides:
+        return options.policy
+    limits = replace(options.policy.limits, **overrides)
+    return replace(options.policy, limits=limits)
+
+
+def submission_key(sha256: str, assignment: Assignment, options: GradingOptions) -> str:
+    """Identifies a grading: same file, same checks, same engine -> same key."""
+    text = "|".join((sha256, assignment.checks_digest, ENGINE_VERSION, options.digest()))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class _Unreadable:
+    """Stands in for a worker when the file could not be run at all."""
+
+    def __init__(self, message: str) -> None:
+        self.message = message
+
+    def call(self, name: str, args: Any, kwargs: dict[str, Any], *, timeout: float,
+             figures: bool = False) -> tuple[Any, list[Any]]:
+        raise WorkerCrashed(self.message)
+
+    def figures(self, *, timeout: float) -> list[Any]:
+        raise WorkerCrashed(self.message)
+
+
+class Grader:
+    """Grades submissions of one assignment, one at a time, on one warm worker slot."""
+
+    def __init__(self, assignment: Assignment, options: GradingOptions | None = None,
+                 *, slot: int = 0) -> None:
+        self.assignment = assignment
+        self.options = options or GradingOptions()
+        self.policy = policy_for(assignment, self.options)
+        self._slot = WorkerSlot(slot=slot)
+        os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = "1"
+
+    def __enter__(self) -> "Grader":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._slot.shutdown()
+
+    @property
+    def check_files(self) -> list[Path]:
+        files = list(self.assignment.public_checks)
+        if not self.options.public_only:
+            files += list(self.assignment.hidden_checks)
+        return files
+
+    # -- the unit of work ----------------------------------------------------
+    def grade(self, path: Path, *, id: str | None = None,
+              out_dir: Path | None = None) -> SubmissionResult:
+        """Grade ``path``; write ``out_dir/results.json`` when ``out_dir`` is given."""
+        start = time.perf_counter()
+        sub_id = id or Path(path).stem
+        raw_sha = _file_sha256(path)
+        key = submission_key(raw_sha, self.assignment, self.options)
+        seed = int(hashlib.sha256((raw_sha + self.assignment.checks_digest).encode())
+                   .hexdigest()[:8], 16)
+        try:
+            notebook: Notebook | None = read_notebook(path, max_bytes=self.options.max_notebook_bytes)
+            problem = ""
+        except NotebookError as exc:
+            notebook, problem = None, str(exc)
+        if notebook is not None:
+            result = self._grade_notebook(notebook, seed, out_dir)
+        else:
+            result = self._grade_unreadable(problem, seed, out_dir)
+        result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
+                         execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
+        if out_dir is not None:
+            write_result(out_dir, result)
+        return result
+
+    def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None) -> SubmissionResult:
+        message = f"This file could not be graded: {problem}"
+        tests, _ = self._run_checks(_Unreadable(message), (), {}, seed, out_dir)
+        return _result(self.assignment.name, "ungradable", message, tests, seed)
+
+    def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None) -> SubmissionResult:
+        cells = [(c.index, c.source) for c in notebook.cells]
+        forbidden = forbidden_functions(self.assignment, [c.source for c in notebook.cells],
+                                        [c.index for c in notebook.cells])
+        session = StudentSession(
+            slot=self._slot, cells=cells, data_files=self._data_files(), policy=self.policy,
+            notebook_timeout=self.options.notebook_timeout or self.assignment.notebook_timeout,
+            exclude=self._excluded_paths())
+        try:
+            run = session.start()
+            tests, log = self._run_checks(session, run.functions, forbidden, seed, out_dir)
+        finally:
+            session.close()
+        outcome = ("timeout" if run.timed_out_cells else
+                   "crashed" if run.crashed or run.crashed_cells else "graded")
+        result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)
+        return replace(result, stdout=run.stdout, notes=tuple(run.notes) + tuple(notebook.warnings),
+                       cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
+                                         for c in run.cells if not c.ok))
+
+    def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
+                    seed: int, out_dir: Path | None) -> tuple[tuple[CheckResult, ...], list[str]]:
+        context = CheckContext(
+            target=target, functions=tuple(functions), forbidden=forbidden,
+            call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
+            hidden_root=self.assignment.root / "checks" / "hidden",
+            attachments=(out_dir / "images") if out_dir is not None else None)
+        plugin = GradingPlugin(context)
+        run_pytest(self.check_files, self.assignment.root, plugin)
+        if plugin.collection_errors:
+            raise AssignmentError(
+                f"The checks of assignment {self.assignment.name!r} could not be collected; "
+                "fix them before grading:\n" + "\n".join(plugin.collection_errors))
+        if out_dir is not None and plugin.instructor_log:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            (out_dir / "grader.log").write_text("\n\n".join(plugin.instructor_log))
+        return tuple(plugin.results), plugin.instructor_log
+
+    def _data_files(self) -> list[tuple[Path, str]]:
+        root = self.assignment.root
+        return [(p, str(p.relative_to(root))) for p in self.assignment.data_files]
+
+    def _excluded_paths(self) -> list[Path]:
+        roots = {self.assignment.root.resolve(), self.assignment.root.resolve().parent}
+        package = Path(autograder.__file__).resolve().parent
+        roots.add(package)
+        if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
+            roots.add(package.parent)
+        return sorted(roots)
+
+
+def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> int:
+    """Run the check files in this (trusted) process with ``plugin``; no terminal output."""
+    args = [str(f) for f in files] + [
+        "-c", os.devnull, "--rootdir", str(rootdir), "-p", "no:cacheprovider",
+        "-p", "no:terminal", "-p", "no:stepwise", "--assert=plain",
+        "-W", "ignore::pytest.PytestAssertRewriteWarning",
+    ]
+    return int(pytest.main(args, plugins=[plugin]))
+
+
+def forbidden_functions(assignment: Assignment, sources: Sequence[str],
+                        cell_numbers: Sequence[int]) -> dict[str, str]:
+    """Map each student function that uses a forbidden name to the message for it."""
+    if not assignment.rules.forbid:
+        return {}
+    report = staticscan.scan(sources, assignment.rules.forbid)
+    messages: dict[str, str] = {}
+    for function in sorted(report.tainted):
+        use = next((u for u in report.uses if u.function == function), None) or \
+            next((u for u in report.uses if u.function is not None), None)
+        where = ""
+        if use is not None:
+            cell = cell_numbers[use.cell] if use.cell < len(cell_numbers) else use.cell
+            where = f" (`{use.name}` in cell {cell + 1}, line {use.line})"
+        messages[function] = (f"`{function}` uses a name this assignment does not allow{where}. "
+                              f"{assignment.rules.reason}")
+    return messages
+
+
+def summarise_run(run: RunReport, notebook: Notebook) -> str:
+    """The student-facing summary of how the notebook ran."""
+    parts = [f"Your notebook's {len(notebook.cells)} code cell(s) ran in {run.seconds:.1f} s."]
+    if not notebook.cells:
+        parts = ["Your notebook has no code to run: did you submit the right file?"]
+    for index in run.timed_out_cells:
+        parts.append(f"Cell {index + 1} did not finish within the time limit and was skipped; "
+                     "the cells after it ran without it.")
+    for index in run.crashed_cells:
+        parts.append(f"Cell {index + 1} ended the worker process (it exited, or hit a memory or "
+                     "CPU limit) and was skipped; the cells after it ran without it.")
+    errors = [c for c in run.cells if not c.ok]
+    if errors:
+        listed = "; ".join(f"cell {c.index + 1} ({c.ename}: {c.evalue[:120]})" for c in errors[:5])
+        parts.append(f"{len(errors)} cell(s) raised an error: {listed}.")
+    if run.crashed:
+        parts.append("The worker running your notebook stopped (it exited, or hit a memory "
+                     "or CPU limit); checks that needed it were scored zero.")
+    return " ".join(parts)
+
+
+def _result(assignment: str, outcome: Any, output: str, tests: tuple[CheckResult, ...],
+            seed: int) -> SubmissionResult:
+    return SubmissionResult(id="", source="", assignment=assignment, key="", sha256="",
+                            outcome=outcome, output=output, tests=tests, execution_time=0.0,
+                            seed=seed)
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as exc:
+        digest.update(f"unreadable:{exc}".encode())
+    return digest.hexdigest()
+
+
+__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "Limits", "forbidden_functions",
+           "run_pytest", "submission_key", "summarise_run"]

@@ -1,0 +1,145 @@
+"""The warm parent: import the heavy libraries once, then fork a child per submission.
+
+Started by the grader as ``python -m autograder.worker --control-fd N``. It pays
+for the interpreter and ``import numpy, scipy, matplotlib, IPython`` once per
+worker slot; each submission then costs a ``fork()``. The standard library's
+``multiprocessing`` forkserver does the same trick but sends pickles both ways,
+which the trust boundary forbids, so this small loop is written by hand.
+
+Control messages (JSON frames from :mod:`autograder.protocol`):
+
+* grader -> parent ``{"op": "spawn", ...}`` followed by one file descriptor
+  (the submission's socket, sent with ``SCM_RIGHTS``);
+* parent -> grader ``{"pid": <child pid>}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import os
+import signal
+import socket
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+# Heavy imports happen here, once, before any fork.
+import numpy  # noqa: F401
+import scipy  # noqa: F401
+import scipy.interpolate  # noqa: F401
+import scipy.linalg  # noqa: F401
+import scipy.spatial  # noqa: F401
+import scipy.special  # noqa: F401
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot  # noqa: E402,F401
+import matplotlib.tri  # noqa: E402,F401
+
+from autograder import protocol, sandbox  # noqa: E402
+from autograder.worker import execute, figures, serve  # noqa: E402
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """Ask the kernel to SIGKILL this process when its parent goes away."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the socket EOF still ends us
+        pass
+
+
+def _reap(signum: int, frame: Any) -> None:
+    while True:
+        try:
+            pid, _ = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
+
+
+def _policy(spec: dict[str, Any]) -> sandbox.IsolationPolicy:
+    limits = sandbox.Limits(**spec.get("limits", {}))
+    rest = {k: (tuple(v) if isinstance(v, list) else v)
+            for k, v in spec.items() if k != "limits"}
+    return sandbox.IsolationPolicy(limits=limits, **rest)
+
+
+def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingShell) -> None:
+    """Enter the sandbox, run the cells, then serve calls. Never returns."""
+    code = 0
+    try:
+        signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+        policy = _policy(request["policy"])
+        workdir = Path(request["workdir"])
+        _quiet_standard_streams()
+        notes = sandbox.enter_sandbox(policy, workdir, slot=int(request["slot"]),
+                                      exclude=[Path(p) for p in request.get("exclude", [])])
+        _die_with_parent()
+        output = execute.capture_output(policy.limits.output_bytes)
+        protocol.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
+        run = execute.Execution(shell, output)
+        run.run([(int(i), str(s)) for i, s in request["cells"]],
+                lambda i: protocol.send_message(sock, {"op": "cell", "index": i}))
+        protocol.send_message(sock, {
+            "op": "ready",
+            "cells": [o.to_wire() for o in run.outcomes],
+            "stdout": output.take(),
+            "functions": serve.defined_functions(shell),
+        })
+        serve.serve(sock, shell, output)
+    except BaseException:  # the child must never fall back into the parent's loop
+        code = 70
+    finally:
+        os._exit(code)
+
+
+def _quiet_standard_streams() -> None:
+    """Point fds 0-2 at /dev/null: C-level and subprocess output never reaches the grader."""
+    null = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):
+        os.dup2(null, fd)
+    os.close(null)
+
+
+def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
+    try:
+        request = protocol.recv_message(control)
+        _, fds, _, _ = socket.recv_fds(control, 1, 1)
+    except (EOFError, OSError, protocol.ProtocolError):
+        return False
+    if not isinstance(request, dict) or request.get("op") != "spawn" or len(fds) != 1:
+        return False
+    sub = socket.socket(fileno=fds[0])
+    pid = os.fork()
+    if pid == 0:
+        control.close()
+        _child(sub, request, shell)
+    sub.close()
+    protocol.send_message(control, {"pid": pid})
+    return True
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m autograder.worker")
+    parser.add_argument("--control-fd", type=int, required=True)
+    args = parser.parse_args(argv)
+    _die_with_parent()
+    control = socket.socket(fileno=args.control_fd)
+    shell = execute.make_shell()
+    figures.close_all()
+    signal.signal(signal.SIGCHLD, _reap)
+    protocol.send_message(control, {"op": "hello", "pid": os.getpid(),
+                                    "python": sys.version.split()[0], "time": time.time()})
+    while _spawn(control, shell):
+        pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

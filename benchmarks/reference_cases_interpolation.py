@@ -1,0 +1,94 @@
+"""Benchmark cases: ``reference.interpolation`` and ``reference.bezier`` against SciPy.
+
+- barycentric interpolation, 100 Chebyshev points, 1e6 evaluation points, against
+  :func:`scipy.interpolate.barycentric_interpolate`; both compute their weights
+  inside the timed call. Target: no slower than SciPy. SciPy forms the whole
+  (1e6, 100) matrix (0.8 GB, more with temporaries); ours works in chunks, so
+  :func:`memory_peaks` also reports both peaks, measured with :mod:`tracemalloc`
+  (numpy reports its buffers to it).
+- a degree-5 Bezier curve in the plane at 1e6 parameter values, against
+  :class:`scipy.interpolate.BPoly` built on the single interval ``[0, 1]``
+  (construction inside the timed call too). Target: no slower than SciPy.
+
+Inputs are made once, from a seeded generator, outside the timed callables.
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+from typing import Callable
+
+import numpy as np
+import scipy.interpolate as si
+
+from reference.bezier import bezier
+from reference.interpolation import barycentric_interpolate, chebyshev_nodes
+
+N_NODES = 100
+N_EVAL = 1_000_000
+BEZIER_DEGREE = 5
+SEED = 20240612
+TARGET = "no slower than SciPy"
+
+Case = tuple[str, Callable[[], object], Callable[[], object], str]
+
+
+def _barycentric_pair() -> tuple[Callable[[], object], Callable[[], object]]:
+    rng = np.random.default_rng(SEED)
+    x = chebyshev_nodes(N_NODES - 1)
+    y = np.exp(x) * np.cos(8 * x) + 0.01 * rng.normal(size=N_NODES)
+    t = rng.uniform(-1.0, 1.0, N_EVAL)
+    return (
+        lambda: barycentric_interpolate(x, y, t),
+        lambda: si.barycentric_interpolate(x, y, t),
+    )
+
+
+def _bezier_pair() -> tuple[Callable[[], object], Callable[[], object]]:
+    rng = np.random.default_rng(SEED + 1)
+    ctrl = rng.normal(size=(BEZIER_DEGREE + 1, 2))
+    t = rng.uniform(0.0, 1.0, N_EVAL)
+    return (
+        lambda: bezier(ctrl, t),
+        lambda: si.BPoly(ctrl[:, None, :], [0.0, 1.0])(t),
+    )
+
+
+def cases() -> list[Case]:
+    return [
+        ("barycentric 100 Chebyshev nodes, 1e6 points", *_barycentric_pair(), TARGET),
+        ("bezier degree 5 in 2-D, 1e6 points (vs BPoly)", *_bezier_pair(), TARGET),
+    ]
+
+
+def _peak_bytes(fn: Callable[[], object]) -> int:
+    """Peak traced allocation during ``fn()`` (its result included), in bytes."""
+    tracemalloc.start()
+    try:
+        tracemalloc.reset_peak()
+        fn()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def memory_peaks() -> list[tuple[str, int, int]]:
+    ours, theirs = _barycentric_pair()
+    return [
+        ("barycentric 100 Chebyshev nodes, 1e6 points", _peak_bytes(ours), _peak_bytes(theirs))
+    ]
+
+
+if __name__ == "__main__":
+    import time
+
+    for name, ours_fn, theirs_fn, target in cases():
+        timings = []
+        for fn in (ours_fn, theirs_fn):
+            start = time.perf_counter()
+            fn()
+            timings.append(time.perf_counter() - start)
+        print(f"{name:<48} ours {timings[0]:.3f} s  scipy {timings[1]:.3f} s  ({target})")
+    for name, ours_peak, theirs_peak in memory_peaks():
+        mib = ours_peak / 2**20, theirs_peak / 2**20
+        print(f"{name:<48} peak ours {mib[0]:.1f} MiB  scipy {mib[1]:.1f} MiB")

@@ -1,0 +1,481 @@
+"""Exact orientation predicate and planar convex hulls.
+
+The orientation of three points is the sign of a 2x2 determinant. Evaluated
+naively in floating point it can return the wrong sign for nearly collinear
+points, and textbook hull algorithms then fail in every possible way (Kettner
+et al. 2008). Here the determinant is evaluated with Shewchuk's floating-point
+filter: when the rounded value is larger than a certified bound on its rounding
+error its sign is the true sign; otherwise the determinant is recomputed
+exactly with :class:`fractions.Fraction` (every finite double is a rational
+number, so the exact sign is always available).
+
+Public functions: :func:`orient2d`, :func:`convex_hull`.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from reference._validation import as_point, as_points, check_choice
+
+__all__ = ["orient2d", "convex_hull"]
+
+# Unit roundoff of IEEE binary64 (Shewchuk's "epsilon").
+_EPS = 2.0**-53
+# Shewchuk (1997), Section 4.2: |det - fl(det)| <= (3 + 16 eps) eps * detsum.
+_CCW_ERRBOUND = (3.0 + 16.0 * _EPS) * _EPS
+# The bound assumes no underflow or overflow. It is used only when every
+# coordinate difference is zero or lies in [_LO, _HI]: then every product is a
+# normal number and so is the bound itself; otherwise the exact path decides.
+_LO = 2.0**-450
+_HI = 2.0**500
+
+_METHODS = ("jarvis", "monotone")
+
+
+# ---------------------------------------------------------------------------
+# Scalar predicate (Python floats)
+# ---------------------------------------------------------------------------
+
+
+def _sign(value: Fraction | float) -> int:
+    return (value > 0) - (value < 0)
+
+
+def _orient_exact(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> int:
+    """Exact sign of the orientation determinant, with rationals."""
+    frx, fry = Fraction(rx), Fraction(ry)
+    det = (Fraction(px) - frx) * (Fraction(qy) - fry) - (Fraction(py) - fry) * (
+        Fraction(qx) - frx
+    )
+    return _sign(det)
+
+
+def _in_range(d: float) -> bool:
+    return d == 0.0 or _LO <= abs(d) <= _HI
+
+
+def _orient_xy(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> int:
+    """Sign of orient2d for Python floats: filter first, exact when unsure."""
+    acx = px - rx
+    bcx = qx - rx
+    acy = py - ry
+    bcy = qy - ry
+    detleft = acx * bcy
+    detright = acy * bcx
+    det = detleft - detright
+    detsum = abs(detleft) + abs(detright)
+    if _in_range(acx) and _in_range(bcx) and _in_range(acy) and _in_range(bcy):
+        if det > _CCW_ERRBOUND * detsum or -det > _CCW_ERRBOUND * detsum:
+            return 1 if det > 0 else -1
+        if detsum == 0.0:
+            # Both products are exact zeros (no underflow in range).
+            return 0
+    return _orient_exact(px, py, qx, qy, rx, ry)
+
+
+def _orient_xy_tame(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> int:
+    """:func:`_orient_xy` without the range checks.
+
+    Only for coordinates accepted by :func:`_is_tame`, whose pairwise
+    differences are always zero or inside ``[_LO, _HI]``.
+    """
+    acx = px - rx
+    bcx = qx - rx
+    acy = py - ry
+    bcy = qy - ry
+    detleft = acx * bcy
+    detright = acy * bcx
+    det = detleft - detright
+    bound = _CCW_ERRBOUND * (abs(detleft) + abs(detright))
+    if det > bound:
+        return 1
+    if -det > bound:
+        return -1
+    if bound == 0.0:
+        return 0
+    return _orient_exact(px, py, qx, qy, rx, ry)
+
+
+def _is_tame(coords: NDArray[np.float64]) -> bool:
+    """True when every nonzero ``|coordinate|`` lies in ``[2**-140, 2**240]``.
+
+    For such data every difference of two coordinates is zero or lies in
+    ``[2**-193, 2**241]``, inside the ranges that the filters of this module
+    and of :mod:`reference.delaunay` need, so the per-call range checks can be
+    skipped.
+    """
+    mag = np.abs(coords)
+    nonzero = mag[mag > 0]
+    if nonzero.size == 0:
+        return True
+    return bool(nonzero.min() >= 2.0**-140 and nonzero.max() <= 2.0**240)
+
+
+# ---------------------------------------------------------------------------
+# Vectorised predicate
+# ---------------------------------------------------------------------------
+
+
+def _orient2d_many(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> NDArray[np.int8]:
+    """Vectorised :func:`orient2d` over broadcastable arrays of points.
+
+    ``p``, ``q`` and ``r`` have shapes broadcastable to ``(m, 2)``; the result
+    has shape ``(m,)`` and dtype int8. The same filter as the scalar predicate
+    is applied to every row at once; rows where it is inconclusive are decided
+    exactly with :class:`fractions.Fraction`.
+    """
+    p, q, r = np.broadcast_arrays(
+        np.asarray(p, dtype=np.float64),
+        np.asarray(q, dtype=np.float64),
+        np.asarray(r, dtype=np.float64),
+    )
+    p = p.reshape(-1, 2)
+    q = q.reshape(-1, 2)
+    r = r.reshape(-1, 2)
+    with np.errstate(over="ignore", invalid="ignore", under="ignore"):
+        acx = p[:, 0] - r[:, 0]
+        bcx = q[:, 0] - r[:, 0]
+        acy = p[:, 1] - r[:, 1]
+        bcy = q[:, 1] - r[:, 1]
+        detleft = acx * bcy
+        detright = acy * bcx
+        det = detleft - detright
+        detsum = np.abs(detleft) + np.abs(detright)
+        ok = np.ones(det.shape, dtype=bool)
+        for d in (acx, bcx, acy, bcy):
+            a = np.abs(d)
+            ok &= (a == 0.0) | ((a >= _LO) & (a <= _HI))
+        sure = ok & ((np.abs(det) > _CCW_ERRBOUND * detsum) | (detsum == 0.0))
+    out = np.sign(np.where(sure, det, 0.0)).astype(np.int8)
+    for i in np.flatnonzero(~sure):
+        out[i] = _orient_exact(
+            float(p[i, 0]), float(p[i, 1]), float(q[i, 0]),
+            float(q[i, 1]), float(r[i, 0]), float(r[i, 1]),
+        )  # fmt: skip
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Public predicate
+# ---------------------------------------------------------------------------
+
+
+def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
+    r"""Exact orientation of three points in the plane.
+
+    Parameters
+    ----------
+    p, q, r : array_like, shape (2,)
+        Finite points.
+
+    Returns
+    -------
+    int
+        ``+1`` when ``p, q, r`` make a left (counter-clockwise) turn, ``-1``
+        for a right (clockwise) turn and ``0`` when they are collinear. The
+        sign is exact for every finite double input.
+
+    Raises
+    ------
+    ValueError
+        If a point does not have shape ``(2,)`` or holds NaN or infinity.
+
+    Notes
+    -----
+    The predicate is the sign of
+
+    .. math::
+
+        \det\begin{pmatrix} p_x - r_x & p_y - r_y \\ q_x - r_x & q_y - r_y
+        \end{pmatrix} = (p_x - r_x)(q_y - r_y) - (p_y - r_y)(q_x - r_x),
+
+    twice the signed area of the triangle ``p q r``. It is evaluated in
+    floating point first. With ``detsum = |(p_x - r_x)(q_y - r_y)| +
+    |(p_y - r_y)(q_x - r_x)|`` the rounding error of the computed value is at
+    most ``(3 + 16 eps) eps detsum`` with ``eps = 2**-53`` (Shewchuk 1997,
+    Section 4.2), so a computed value larger than that bound has the correct
+    sign. Otherwise the determinant is recomputed exactly from the rational
+    values of the doubles (:class:`fractions.Fraction`). The bound assumes that
+    no product underflows or overflows; inputs whose coordinate differences are
+    tiny (below ``2**-450``) or huge (above ``2**500``) always take the exact
+    path.
+
+    A naive floating-point evaluation gets the sign wrong on points close to
+    a line; Kettner et al. (2008) show how this breaks convex hull
+    algorithms.
+
+    References
+    ----------
+    .. [1] J. R. Shewchuk, "Adaptive precision floating-point arithmetic and
+       fast robust geometric predicates", Discrete & Computational Geometry
+       18, 305-363 (1997). :doi:`10.1007/PL00009321`
+    .. [2] L. Kettner, K. Mehlhorn, S. Pion, S. Schirra and C. Yap, "Classroom
+       examples of robustness problems in geometric computations",
+       Computational Geometry 40(1), 61-78 (2008).
+       :doi:`10.1016/j.comgeo.2007.06.003`
+
+    Examples
+    --------
+    >>> from reference.geometry import orient2d
+    >>> orient2d([0, 0], [1, 0], [0, 1])
+    1
+    >>> orient2d([0, 0], [0, 1], [1, 0])
+    -1
+    >>> orient2d([0, 0], [1, 1], [3, 3])
+    0
+
+    A point one unit in the last place above the line ``y = x``, where the
+    naive formula rounds to zero:
+
+    >>> p = [0.5, 0.5 + 2.0**-53]
+    >>> (12.0 - 0.5) * (24.0 - p[1]) - (12.0 - p[1]) * (24.0 - 0.5)
+    0.0
+    >>> orient2d(p, [12, 12], [24, 24])
+    1
+    """
+    a = as_point(p, "p")
+    b = as_point(q, "q")
+    c = as_point(r, "r")
+    return _orient_xy(float(a[0]), float(a[1]), float(b[0]), float(b[1]), float(c[0]), float(c[1]))
+
+
+# ---------------------------------------------------------------------------
+# Convex hull
+# ---------------------------------------------------------------------------
+
+
+def _sorted_unique(points: NDArray[np.float64]) -> NDArray[np.intp]:
+    """Indices of the distinct points in lexicographic order (x, then y).
+
+    Among equal points the smallest index is kept (``np.lexsort`` is stable).
+    """
+    order = np.lexsort((points[:, 1], points[:, 0]))
+    sp = points[order]
+    keep = np.ones(order.size, dtype=bool)
+    keep[1:] = np.any(sp[1:] != sp[:-1], axis=1)
+    return order[keep]
+
+
+def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -> NDArray[np.intp]:
+    """Drop points of ``idx`` that lie strictly inside a polygon of input points.
+
+    The polygon joins the points extreme in ``k`` directions, in the order of
+    the directions (Akl and Toussaint's heuristic with ``k`` directions instead
+    of four). A point strictly to the left of every directed edge of *any*
+    closed polygon of input points lies in the interior of their convex hull
+    (its winding number would otherwise be zero), so it is not on the hull;
+    the extremes need not be computed exactly. The left-of tests use a margin
+    that bounds every rounding error, so a point is dropped only when it is
+    certainly strictly inside; doubtful points are kept for the exact stage.
+    """
+    x = points[idx, 0]
+    y = points[idx, 1]
+    mx = float(np.max(np.abs(x)))
+    my = float(np.max(np.abs(y)))
+    if max(mx, my) > 1e150:  # differences could overflow: skip the heuristic
+        return idx
+    if k == 8:  # directions at multiples of 45 degrees, without a 2-D array
+        s = x + y
+        t = x - y
+        ext = np.array([np.argmax(x), np.argmax(s), np.argmax(y), np.argmin(t),
+                        np.argmin(x), np.argmin(s), np.argmin(y), np.argmax(t)])  # fmt: skip
+    else:
+        theta = 2.0 * np.pi * np.arange(k) / k
+        ext = np.argmax(np.outer(x, np.cos(theta)) + np.outer(y, np.sin(theta)), axis=0)
+    ext = ext[np.concatenate(([True], ext[1:] != ext[:-1]))]
+    if ext.size > 1 and ext[0] == ext[-1]:
+        ext = ext[:-1]
+    if ext.size < 3:
+        return idx
+    inside = np.ones(idx.size, dtype=bool)
+    for a, b in zip(ext, np.roll(ext, -1)):
+        ax, ay, bx, by = x[a], y[a], x[b], y[b]
+        dx = bx - ax
+        dy = by - ay
+        # Exact value (dx*(y - ay) - dy*(x - ax)) minus the computed
+        # (dx*y - dy*x) - c is at most ~8 eps (|dx| my + |dy| mx); the margin
+        # is 90 eps times that, plus an absolute term for underflow.
+        margin = 1e-14 * (abs(dx) * my + abs(dy) * mx) + 1e-300
+        c = dx * ay - dy * ax
+        inside &= (dx * y - dy * x) > c + margin
+    return idx[~inside]
+
+
+def _monotone_chain(points: NDArray[np.float64], order: NDArray[np.intp]) -> list[int]:
+    """Andrew's monotone chain over distinct points sorted lexicographically."""
+    xs = points[order, 0].tolist()
+    ys = points[order, 1].tolist()
+    ids = order.tolist()
+    if len(ids) == 1:
+        return ids
+
+    def chain(seq: range) -> list[int]:
+        hull: list[int] = []
+        for i in seq:
+            while len(hull) >= 2:
+                j, k = hull[-2], hull[-1]
+                if _orient_xy(xs[j], ys[j], xs[k], ys[k], xs[i], ys[i]) > 0:
+                    break
+                hull.pop()
+            hull.append(i)
+        return hull
+
+    lower = chain(range(len(ids)))
+    upper = chain(range(len(ids) - 1, -1, -1))
+    return [ids[i] for i in lower[:-1] + upper[:-1]]
+
+
+def _hull_monotone(points: NDArray[np.float64]) -> list[int]:
+    idx = np.arange(points.shape[0])
+    if idx.size > 64:
+        idx = _akl_toussaint(points, idx, 8)
+        if idx.size > 2048:
+            idx = _akl_toussaint(points, idx, 64)
+    return _monotone_chain(points, idx[_sorted_unique(points[idx])])
+
+
+def _jarvis_step(points: NDArray[np.float64], cur: int, direction: NDArray[np.float64]) -> int:
+    """Next hull vertex after ``cur`` (an index into the distinct ``points``).
+
+    ``direction`` is the direction of the previous hull edge. A float guess
+    (smallest counter-clockwise turn from ``direction``) is corrected with the
+    exact predicate until no point lies strictly to the right of the edge;
+    each correction turns the edge clockwise, so this stops. Among points on
+    the final edge's ray the farthest one is taken.
+    """
+    c = points[cur]
+    with np.errstate(over="ignore", invalid="ignore"):  # only a guess: may overflow
+        d = points - c
+        heading = np.arctan2(direction[1], direction[0])
+        turn = np.mod(np.arctan2(d[:, 1], d[:, 0]) - heading, 2 * np.pi)
+    turn[np.isnan(turn)] = 0.0
+    turn[cur] = np.inf
+    cand = int(np.argmin(turn))
+    others = np.ones(points.shape[0], dtype=bool)
+    others[cur] = False
+    for _ in range(points.shape[0]):
+        o = _orient2d_many(c, points[cand], points)
+        right = np.flatnonzero((o < 0) & others)
+        if right.size == 0:
+            break
+        cand = int(right[np.argmin(turn[right])])
+    # Farthest point on the ray from c through cand (exact float comparisons).
+    on_ray = (o == 0) & others
+    axis = 0 if points[cand, 0] != c[0] else 1
+    sgn = 1.0 if points[cand, axis] > c[axis] else -1.0
+    key = sgn * points[:, axis]
+    on_ray &= key > sgn * c[axis]
+    ray = np.flatnonzero(on_ray)
+    return int(ray[np.argmax(key[ray])])
+
+
+def _hull_jarvis(points: NDArray[np.float64]) -> list[int]:
+    ids = _sorted_unique(points)
+    pts = points[ids]
+    if ids.size == 1:
+        return [int(ids[0])]
+    hull = [0]  # the lexicographically smallest point is a hull vertex
+    direction = np.array([0.0, -1.0])
+    for _ in range(ids.size):
+        nxt = _jarvis_step(pts, hull[-1], direction)
+        if nxt == 0:
+            return [int(ids[i]) for i in hull]
+        with np.errstate(over="ignore"):
+            direction = pts[nxt] - pts[hull[-1]]
+        hull.append(nxt)
+    raise RuntimeError("Jarvis march did not close the hull within n steps.")  # pragma: no cover
+
+
+def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]:
+    r"""Vertices of the convex hull of a planar point set.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 2)
+        Finite points, ``n >= 1``.
+    method : {"monotone", "jarvis"}, optional
+        ``"monotone"`` (default): Andrew's monotone chain, :math:`O(n \log n)`.
+        ``"jarvis"``: Jarvis's march (gift wrapping), :math:`O(nh)` for
+        ``h`` hull vertices.
+
+    Returns
+    -------
+    ndarray of intp, shape (h,)
+        Indices into ``points`` of the hull vertices in counter-clockwise
+        order, starting at the lexicographically smallest point (smallest
+        ``x``, then smallest ``y``); the first index is not repeated at the
+        end. Points in the interior of a hull edge are not vertices. Among
+        equal points the smallest index is used. A single distinct point gives
+        one index; distinct points that are all collinear give the two end
+        points, the lexicographically smallest first. Both methods return the
+        same array.
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not a finite ``(n, 2)`` array with ``n >= 1``, or
+        ``method`` is not one of the names above.
+
+    Notes
+    -----
+    Every decision is made by the exact predicate :func:`orient2d`, so the
+    result is the hull of the points as given, whatever their rounding.
+
+    *Monotone chain* (Andrew 1979). Sort the points by ``(x, y)``. The lower
+    hull is built left to right: a point ``r`` is appended after popping the
+    last vertex ``q`` while ``orient2d(p, q, r) <= 0`` (``p`` the vertex
+    before ``q``), so right turns, collinear and repeated vertices are
+    removed. The upper hull is the same scan right to left. Before the scan,
+    an Akl-Toussaint filter removes the points that lie strictly inside the
+    polygon through the points extreme in 8 (then 64) directions; a point is
+    removed only when a bound on every rounding error shows it is strictly
+    inside, so the filter never changes the result.
+
+    *Jarvis march* (Jarvis 1973). From the lexicographically smallest point
+    ``c`` (a hull vertex), the next vertex ``v`` is the point such that no
+    point lies strictly to the right of the line ``c -> v``; among points on
+    that line the farthest is taken, which removes collinear vertices and
+    makes every step advance to a true vertex. With the exact predicate each
+    vertex is visited once, so the loop ends after at most ``n`` steps; with a
+    floating-point predicate the textbook version can loop forever on nearly
+    collinear points (Kettner et al. 2008).
+
+    References
+    ----------
+    .. [1] R. A. Jarvis, "On the identification of the convex hull of a finite
+       set of points in the plane", Information Processing Letters 2(1),
+       18-21 (1973). :doi:`10.1016/0020-0190(73)90020-3`
+    .. [2] A. M. Andrew, "Another efficient algorithm for convex hulls in two
+       dimensions", Information Processing Letters 9(5), 216-219 (1979).
+       :doi:`10.1016/0020-0190(79)90072-3`
+    .. [3] L. Kettner, K. Mehlhorn, S. Pion, S. Schirra and C. Yap, "Classroom
+       examples of robustness problems in geometric computations",
+       Computational Geometry 40(1), 61-78 (2008).
+       :doi:`10.1016/j.comgeo.2007.06.003`
+    .. [4] J. R. Shewchuk, "Adaptive precision floating-point arithmetic and
+       fast robust geometric predicates", Discrete & Computational Geometry
+       18, 305-363 (1997). :doi:`10.1007/PL00009321`
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from reference.geometry import convex_hull
+    >>> square = [[1, 1], [0, 0], [1, 0], [0.5, 0.5], [0, 1], [0.5, 0]]
+    >>> convex_hull(square)
+    array([1, 2, 0, 4])
+    >>> convex_hull(square, method="jarvis")
+    array([1, 2, 0, 4])
+    >>> convex_hull([[2, 2], [0, 0], [1, 1]])
+    array([1, 0])
+    """
+    pts = as_points(points, "points")
+    check_choice(method, "method", _METHODS)
+    if method == "jarvis":
+        hull = _hull_jarvis(pts)
+    else:
+        hull = _hull_monotone(pts)
+    return np.asarray(hull, dtype=np.intp)

@@ -1,0 +1,547 @@
+"""Tests of :mod:`autograder.sandbox`.
+
+Each sandbox case forks a child that enters the sandbox in a temporary working
+directory, tries one thing and reports over a pipe as JSON; the parent asserts.
+Every child runs under a wall-clock deadline: past it, the parent kills the
+child's process group, so no case can hang the suite.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from autograder.errors import UsageError
+from autograder.sandbox import (
+    IsolationPolicy,
+    Limits,
+    clean_environment,
+    enter_sandbox,
+    probe_support,
+    readable_paths,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+CHILD_DEADLINE = 20.0  # seconds of wall-clock time a forked child may take
+SECRET = "hunter2-not-for-students"
+
+DEFAULT = IsolationPolicy()
+LANDLOCK_ONLY = IsolationPolicy(network_namespace=False, drop_user=False)
+NAMESPACE_ONLY = IsolationPolicy(landlock=False)
+
+
+# ---------------------------------------------------------------------- harness
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a sandboxed child reported, and how it ended."""
+
+    report: dict[str, Any] | None
+    status: int
+    timed_out: bool
+
+    @property
+    def signal(self) -> int:
+        return os.WTERMSIG(self.status) if os.WIFSIGNALED(self.status) else 0
+
+    @property
+    def value(self) -> Any:
+        assert self.report is not None, f"the child reported nothing (status {self.status:#x})"
+        assert "value" in self.report, f"the child failed: {self.report}"
+        return self.report["value"]
+
+    @property
+    def error(self) -> dict[str, Any]:
+        assert self.report is not None, f"the child reported nothing (status {self.status:#x})"
+        assert "error" in self.report, f"the action did not raise: {self.report}"
+        return self.report
+
+
+def run_sandboxed(
+    action: Callable[[], Any],
+    workdir: Path,
+    *,
+    policy: IsolationPolicy = DEFAULT,
+    slot: int = 0,
+    exclude: Sequence[Path] = (),
+    deadline: float = CHILD_DEADLINE,
+) -> Outcome:
+    """Fork, enter the sandbox in the child, run ``action`` there, collect the report."""
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child never returns into pytest
+        os.close(read_fd)
+        _child_main(action, write_fd, policy, workdir, slot, exclude)
+    os.close(write_fd)
+    try:
+        data, status, timed_out = _collect(pid, read_fd, deadline)
+    finally:
+        os.close(read_fd)
+        _kill_group(pid)
+    return Outcome(json.loads(data) if data else None, status, timed_out)
+
+
+def _child_main(
+    action: Callable[[], Any],
+    write_fd: int,
+    policy: IsolationPolicy,
+    workdir: Path,
+    slot: int,
+    exclude: Sequence[Path],
+) -> None:
+    code = 70
+    try:
+        try:
+            notes = enter_sandbox(policy, workdir, slot=slot, exclude=exclude)
+        except BaseException as exc:
+            report: dict[str, Any] = {"sandbox_error": repr(exc)}
+        else:
+            report = {"notes": list(notes), **_call(action)}
+        os.write(write_fd, json.dumps(report).encode())
+        code = 0
+    finally:
+        os._exit(code)
+
+
+def _call(action: Callable[[], Any]) -> dict[str, Any]:
+    try:
+        return {"value": action()}
+    except Exception as exc:
+        return {"error": type(exc).__name__, "errno": getattr(exc, "errno", None),
+                "message": str(exc)}
+
+
+def _collect(pid: int, read_fd: int, deadline: float) -> tuple[bytes, int, bool]:
+    chunks: list[bytes] = []
+    os.set_blocking(read_fd, False)
+    end = time.monotonic() + deadline
+    while time.monotonic() < end:
+        _drain(read_fd, chunks)
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            _drain(read_fd, chunks)
+            return b"".join(chunks), status, False
+        time.sleep(0.01)
+    _kill_group(pid)
+    _, status = os.waitpid(pid, 0)
+    return b"".join(chunks), status, True
+
+
+def _drain(fd: int, chunks: list[bytes]) -> None:
+    while True:
+        try:
+            chunk = os.read(fd, 65536)
+        except BlockingIOError:
+            return
+        if not chunk:
+            return
+        chunks.append(chunk)
+
+
+def _kill_group(pid: int) -> None:
+    """Kill whatever is left of the child's session (its group id is its pid)."""
+    for kill in (os.killpg, os.kill):
+        try:
+            kill(pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+def require_landlock(min_abi: int, what: str) -> None:
+    abi = probe_support().landlock_abi
+    if abi < min_abi:
+        pytest.skip(f"Landlock unavailable (ABI {abi}): {what} needs ABI {min_abi}.")
+
+
+def require_root(what: str) -> None:
+    if not probe_support().is_root:
+        pytest.skip(f"Not running as root: {what} needs root.")
+
+
+def require_policy(policy: IsolationPolicy) -> None:
+    """Skip a parametrised case whose policy this machine cannot apply."""
+    if policy.landlock:
+        require_landlock(6, "a policy that relies on Landlock")
+    if policy.network_namespace or policy.drop_user:
+        require_root("a policy with a network namespace or a user switch")
+
+
+@pytest.fixture
+def workdir(tmp_path: Path) -> Path:
+    path = tmp_path / "work"
+    path.mkdir()
+    return path
+
+
+@pytest.fixture
+def grader_terms() -> Iterator[list[int]]:
+    """Record SIGTERMs sent to this process instead of dying from them."""
+    received: list[int] = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    try:
+        yield received
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+# ------------------------------------------------------------------ plain checks
+
+
+def test_limits_reject_non_positive_values() -> None:
+    message = r"`limits.memory_bytes` must be a positive integer; got 0"
+    with pytest.raises(UsageError, match=message):
+        Limits(memory_bytes=0)
+    with pytest.raises(UsageError, match="`limits.cpu_seconds`"):
+        Limits(cpu_seconds=True)
+
+
+def test_policy_rejects_bad_settings() -> None:
+    with pytest.raises(UsageError, match="`policy.base_uid`"):
+        IsolationPolicy(base_uid=-1)
+    with pytest.raises(UsageError, match="`policy.allowed_read`"):
+        IsolationPolicy(allowed_read="/data")  # type: ignore[arg-type]
+    with pytest.raises(UsageError, match="`policy.limits`"):
+        IsolationPolicy(limits={"cpu_seconds": 1})  # type: ignore[arg-type]
+
+
+def test_enter_sandbox_rejects_bad_slot_before_changing_anything(workdir: Path) -> None:
+    with pytest.raises(UsageError, match="`slot` must be a non-negative integer; got -1"):
+        enter_sandbox(DEFAULT, workdir, slot=-1)
+    with pytest.raises(UsageError, match=r"`policy.base_uid \+ slot` must be below"):
+        enter_sandbox(IsolationPolicy(base_uid=2**32 - 2), workdir, slot=1)
+    with pytest.raises(UsageError, match="`workdir` must be an existing directory"):
+        enter_sandbox(DEFAULT, workdir / "missing", slot=0)
+
+
+def test_clean_environment_holds_only_the_fixed_variables(workdir: Path) -> None:
+    env = clean_environment(workdir)
+    assert env["HOME"] == str(workdir)
+    assert env["PATH"] == "/usr/local/bin:/usr/bin:/bin"
+    assert (workdir / ".tmp").is_dir() and env["TMPDIR"] == str(workdir / ".tmp")
+    assert env["MPLBACKEND"] == "Agg" and env["OPENBLAS_NUM_THREADS"] == "1"
+    assert set(env) == {
+        "PATH", "HOME", "TMPDIR", "LANG", "LC_ALL", "MPLBACKEND", "MPLCONFIGDIR",
+        "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS",
+        "PYTHONDONTWRITEBYTECODE", "PYTHONHASHSEED",
+    }
+
+
+def test_readable_paths_leave_out_the_repository_and_install_records() -> None:
+    paths = readable_paths([REPO])
+    assert paths, "nothing would be readable"
+    for path in paths:
+        assert not path.is_relative_to(REPO), path
+        assert not path.name.startswith("__editable__"), path
+        assert not (path.name.startswith("numgrade") and path.name.endswith(".dist-info")), path
+        assert path != Path("/etc/shadow")
+    assert any(Path(sys.base_prefix).resolve() in [p, *p.parents] for p in paths)
+
+
+def test_probe_support_is_cached_and_consistent() -> None:
+    support = probe_support()
+    assert probe_support() is support
+    assert support.is_root == (os.geteuid() == 0)
+    unavailable = any("Landlock is not available" in note for note in support.notes)
+    assert unavailable == (support.landlock_abi == 0)
+
+
+# ----------------------------------------------------------------------- files
+
+
+def test_write_outside_workdir_fails(tmp_path: Path, workdir: Path) -> None:
+    require_landlock(1, "confining writes")
+    open_dir = tmp_path / "world-writable"  # only Landlock stands in the way here
+    open_dir.mkdir(mode=0o777)
+    open_dir.chmod(0o777)
+    target = open_dir / "escaped.txt"
+    outcome = run_sandboxed(lambda: target.write_text("x"), workdir)
+    assert outcome.error["error"] == "PermissionError"
+    assert not target.exists()
+
+
+def test_write_inside_workdir_works(workdir: Path) -> None:
+    def action() -> list[str]:
+        import tempfile
+
+        Path("sub").mkdir()
+        Path("sub/a.txt").write_text("answer")
+        Path("sub/a.txt").rename("b.txt")
+        with tempfile.NamedTemporaryFile() as handle:  # in $TMPDIR, despite the parent's cache
+            handle.write(b"scratch")
+        return sorted(os.listdir("."))
+
+    outcome = run_sandboxed(action, workdir, slot=1)
+    assert "b.txt" in outcome.value
+    assert (workdir / "b.txt").read_text() == "answer"
+    assert any(note.startswith("landlock: ABI") for note in outcome.report["notes"]) or (
+        probe_support().landlock_abi == 0
+    )
+
+
+def test_excluded_tree_inside_an_allowed_root_is_unreadable(tmp_path: Path, workdir: Path) -> None:
+    require_landlock(1, "confining reads")
+    shared = tmp_path / "shared"
+    repo = shared / "repo"
+    (repo / "checks").mkdir(parents=True)
+    (repo / "checks" / "hidden.py").write_text("SECRET = 1\n")
+    (shared / "data.txt").write_text("public\n")
+    policy = IsolationPolicy(allowed_read=(str(shared),))
+
+    def action() -> dict[str, str]:
+        return {
+            "public": (shared / "data.txt").read_text(),
+            "hidden": _try(lambda: (repo / "checks" / "hidden.py").read_text()),
+            "listing": _try(lambda: os.listdir(repo)),
+        }
+
+    value = run_sandboxed(action, workdir, policy=policy, exclude=[repo]).value
+    assert value["public"] == "public\n"
+    assert value["hidden"] == value["listing"] == "PermissionError"
+
+
+def test_repository_and_reference_package_are_unreadable(workdir: Path) -> None:
+    require_landlock(1, "confining reads")
+    design = REPO / "docs" / "design.md"
+    source = REPO / "reference" / "geometry.py"
+    assert design.is_file() and source.is_file()
+    preloaded = "reference.geometry" in sys.modules  # then the import cannot fail
+
+    def action() -> dict[str, str]:
+        return {
+            "design": _try(design.read_text),
+            "source": _try(source.read_text),
+            "import": _try(lambda: __import__("reference.geometry")),
+        }
+
+    value = run_sandboxed(action, workdir, exclude=[REPO]).value
+    assert value["design"] == value["source"] == "PermissionError"
+    if not preloaded:
+        assert value["import"] in ("PermissionError", "ModuleNotFoundError", "ImportError")
+
+
+def _try(action: Callable[[], object]) -> str:
+    """'ok' or the name of the exception ``action`` raised."""
+    try:
+        action()
+    except Exception as exc:
+        return type(exc).__name__
+    return "ok"
+
+
+def test_imports_work_after_the_sandbox(workdir: Path) -> None:
+    modules = ["json", "decimal", "wave", "xml.dom.minidom", "scipy.linalg"]
+
+    def action() -> dict[str, Any]:
+        import importlib
+        import importlib.util
+
+        fresh = [name for name in modules if name not in sys.modules]
+        for name in modules:
+            spec = importlib.util.find_spec(name)
+            spec.loader.get_data(spec.origin)  # read the file even if already imported
+            importlib.import_module(name)
+        import numpy as np
+        import scipy.linalg
+
+        return {"fresh": fresh, "det": float(scipy.linalg.det(np.eye(3)))}
+
+    value = run_sandboxed(action, workdir, exclude=[REPO]).value
+    assert value["det"] == 1.0
+    assert "wave" in value["fresh"]
+
+
+def test_already_open_socket_keeps_working(workdir: Path) -> None:
+    parent_end, child_end = socket.socketpair()
+    with parent_end, child_end:
+        outcome = run_sandboxed(lambda: child_end.sendall(b"still here"), workdir)
+        assert outcome.value is None
+        assert parent_end.recv(100) == b"still here"
+
+
+# --------------------------------------------------------------------- network
+
+
+@pytest.mark.parametrize("policy", [DEFAULT, LANDLOCK_ONLY, NAMESPACE_ONLY],
+                         ids=["default", "landlock-only", "namespace-only"])
+def test_tcp_connect_to_loopback_listener_fails(policy: IsolationPolicy, workdir: Path) -> None:
+    require_policy(policy)
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        address = listener.getsockname()
+
+        def action() -> None:
+            with socket.create_connection(address, timeout=2):
+                pass
+
+        outcome = run_sandboxed(action, workdir, policy=policy, slot=2)
+        assert outcome.error["error"] in ("PermissionError", "OSError", "TimeoutError")
+        listener.setblocking(False)
+        with pytest.raises(BlockingIOError):
+            listener.accept()
+
+
+@pytest.mark.parametrize("policy", [DEFAULT, LANDLOCK_ONLY], ids=["default", "landlock-only"])
+def test_tcp_bind_fails(policy: IsolationPolicy, workdir: Path) -> None:
+    require_landlock(4, "blocking TCP bind")
+    require_policy(policy)
+
+    def action() -> None:
+        with socket.socket() as server:
+            server.bind(("127.0.0.1", 0))
+
+    outcome = run_sandboxed(action, workdir, policy=policy, slot=2)
+    assert outcome.error["error"] == "PermissionError"
+
+
+# --------------------------------------------------------------------- signals
+
+
+@pytest.mark.parametrize("policy", [DEFAULT, LANDLOCK_ONLY], ids=["default", "landlock-only"])
+def test_cannot_signal_the_grader(
+    policy: IsolationPolicy, workdir: Path, grader_terms: list[int]
+) -> None:
+    require_policy(policy)
+    grader = os.getpid()
+    outcome = run_sandboxed(lambda: os.kill(grader, signal.SIGTERM), workdir, policy=policy)
+    assert outcome.error["error"] == "PermissionError"
+    time.sleep(0.05)
+    assert grader_terms == []
+
+
+# ---------------------------------------------------------------------- limits
+
+
+def test_fork_bomb_stops_at_the_process_limit(workdir: Path) -> None:
+    policy = IsolationPolicy(limits=Limits(processes=8))
+
+    def action() -> dict[str, Any]:
+        children: list[int] = []
+        failure = None
+        for _ in range(64):
+            try:
+                pid = os.fork()
+            except OSError as exc:
+                failure = exc.errno
+                break
+            if pid == 0:
+                try:
+                    time.sleep(CHILD_DEADLINE)
+                finally:
+                    os._exit(0)
+            children.append(pid)
+        for pid in children:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        return {"forked": len(children), "errno": failure}
+
+    value = run_sandboxed(action, workdir, policy=policy, slot=3).value
+    assert value["errno"] == errno.EAGAIN
+    assert value["forked"] < 8
+
+
+def test_huge_allocation_raises_memory_error(workdir: Path) -> None:
+    outcome = run_sandboxed(lambda: len(bytearray(12 * 2**30)), workdir)
+    assert outcome.error["error"] == "MemoryError"
+
+
+def test_writing_past_the_file_size_limit_fails(workdir: Path) -> None:
+    limit = 2**20
+    policy = IsolationPolicy(limits=Limits(file_size_bytes=limit))
+
+    def action() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of death
+        with open("big.bin", "wb") as handle:
+            handle.write(b"\0" * (2 * limit))
+
+    outcome = run_sandboxed(action, workdir, policy=policy)
+    assert outcome.error["errno"] == errno.EFBIG
+    assert (workdir / "big.bin").stat().st_size <= limit
+
+
+def test_cpu_limit_kills_a_busy_loop(workdir: Path) -> None:
+    policy = IsolationPolicy(limits=Limits(cpu_seconds=1))
+
+    def action() -> None:
+        while True:
+            pass
+
+    outcome = run_sandboxed(action, workdir, policy=policy, deadline=10)
+    assert not outcome.timed_out, "the CPU limit did not stop the loop"
+    assert outcome.signal in (signal.SIGXCPU, signal.SIGKILL)
+
+
+# ------------------------------------------------------------- environment, user
+
+
+def test_environment_holds_no_secret(workdir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SECRET_TOKEN", SECRET)
+
+    def action() -> dict[str, Any]:
+        proc = Path("/proc/self/environ").read_text("latin-1")
+        return {"environ": dict(os.environ), "proc": proc}
+
+    value = run_sandboxed(action, workdir).value
+    assert "SECRET_TOKEN" not in value["environ"]
+    assert set(value["environ"]) == set(clean_environment(workdir))
+    assert SECRET not in value["proc"]
+
+
+def test_grader_environment_is_unreadable_through_proc(workdir: Path) -> None:
+    # Only with the user switch: Landlock (ABI 7, Linux 6.18) denies ptrace attach
+    # and /proc/<pid>/mem but not PTRACE_MODE_READ, so a child that keeps the
+    # grader's uid can read /proc/<grader>/environ.
+    require_policy(DEFAULT)
+    environ = Path(f"/proc/{os.getpid()}/environ")
+    outcome = run_sandboxed(lambda: environ.read_bytes().hex(), workdir)
+    assert outcome.error["error"] == "PermissionError"
+
+
+def test_inherited_environment_block_is_wiped(workdir: Path) -> None:
+    """A worker started with a secret must not show it in /proc/self/environ."""
+    script = textwrap.dedent(f"""
+        import json, sys
+        from pathlib import Path
+        from autograder.sandbox import IsolationPolicy, enter_sandbox
+        proc = Path("/proc/self/environ")
+        before = "{SECRET}" in proc.read_text("latin-1")
+        enter_sandbox(IsolationPolicy(), Path({str(workdir)!r}), slot=4)
+        after = "{SECRET}" in proc.read_text("latin-1")
+        sys.stdout.write(json.dumps([before, after]))
+    """)
+    env = {**os.environ, "SECRET_TOKEN": SECRET, "PYTHONPATH": str(REPO)}
+    result = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                            text=True, timeout=CHILD_DEADLINE, start_new_session=True)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout) == [True, False]
+
+
+def test_child_runs_as_the_slot_user(workdir: Path) -> None:
+    require_root("switching to the slot's user")
+    policy = IsolationPolicy(base_uid=61000)
+
+    def action() -> dict[str, Any]:
+        lines = Path("/proc/self/status").read_text().splitlines()
+        status = dict(line.split(":\t", 1) for line in lines)
+        return {"ids": [os.getuid(), os.geteuid(), os.getgid(), os.getegid()],
+                "groups": os.getgroups(),
+                "caps": [int(status[key], 16) for key in ("CapEff", "CapPrm", "CapBnd", "CapInh")]}
+
+    value = run_sandboxed(action, workdir, policy=policy, slot=5).value
+    assert value["ids"] == [61005] * 4
+    assert value["groups"] == []
+    dac_read_search = 1 << 2
+    assert value["caps"] == [dac_read_search, dac_read_search, dac_read_search, 0]
+    assert workdir.stat().st_uid == 61005
