@@ -38,7 +38,8 @@ key sets) stand for everything else:
     bytes in buffer ``i``.
 ``{"$t": "figure", "axes": [...], "png": <bytes>, ...}``
     matplotlib figure data made by the worker's figure encoder; decoded to a
-    plain dict (without ``"$t"``).
+    plain dict that keeps ``"$t": "figure"``, so it equals what the same figure
+    data gives when sent as an ordinary (escaped) dict.
 ``{"$t": "unsupported", "type": str, "repr": str, "reason": str}``
     a value that could not be encoded; decoded to :class:`Unsupported`.
 
@@ -68,6 +69,7 @@ ran out. After any of these the stream is out of step: close the connection.
 from __future__ import annotations
 
 import builtins
+import collections
 import dataclasses
 import json
 import math
@@ -76,7 +78,7 @@ import reprlib
 import socket
 import struct
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Sequence, Set
 from typing import Any
 
 import numpy as np
@@ -84,11 +86,13 @@ import numpy as np
 from autograder.errors import ProtocolError
 
 __all__ = [
+    "ProtocolError",
     "MAX_FRAME_BYTES",
     "MAX_DEPTH",
     "MAX_ITEMS",
     "MAX_STR_CHARS",
     "MAX_INT_DIGITS",
+    "MAX_NDIM",
     "Unsupported",
     "encode",
     "encode_result",
@@ -129,16 +133,18 @@ _MAX_REPR_CHARS = 300
 _COALESCE_BYTES = 64 * 1024
 _DTYPE_RE = re.compile(r"[<>|=][biufc](1|2|4|8|16|32)")
 _HEX_RE = re.compile(r"-?0x[0-9a-f]+")
+_DTYPE_RULE = "only bool, int, uint, float and complex dtypes can cross"
+_CAUGHT = (Exception, SystemExit, GeneratorExit)  # what student code may raise while encoding
 _NONFINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
 _HEADER_LEN = struct.Struct(">I")
 _BUF_LEN = struct.Struct(">Q")
 
 # Exact numpy scalar types that cross as Python scalars, with their converter.
+_PYTHON_SCALAR = {"b": bool, "i": int, "u": int, "f": float, "c": complex}
 _NUMPY_SCALARS: dict[type, type] = {
-    np.dtype(code).type: {"b": bool, "i": int, "u": int, "f": float, "c": complex}[np.dtype(code).kind]
+    np.dtype(code).type: _PYTHON_SCALAR[np.dtype(code).kind]
     for code in "?" + np.typecodes["AllInteger"] + np.typecodes["AllFloat"]
 }
-
 
 
 class _Repr(reprlib.Repr):
@@ -198,7 +204,9 @@ def encode(
     """
     bufs: list[Buffer] = [] if buffers is None else buffers
     start = len(bufs)
-    encoder = _Encoder(bufs, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder)
+    encoder = _Encoder(
+        bufs, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder
+    )
     try:
         tree = encoder.encode(value, 0)
     except BaseException:
@@ -227,11 +235,15 @@ def encode_result(
     start = len(bufs)
     try:
         tree, _ = encode(
-            value, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder, buffers=bufs
+            value,
+            max_depth=max_depth,
+            max_items=max_items,
+            figure_encoder=figure_encoder,
+            buffers=bufs,
         )
     except ProtocolError as exc:
         return _unsupported(value, str(exc)), bufs
-    except (Exception, SystemExit, GeneratorExit) as exc:  # defensive: encode should not raise these
+    except _CAUGHT as exc:  # defensive: encode does not raise these
         del bufs[start:]
         return _unsupported(value, f"encoding failed with {_type_name(type(exc))}"), bufs
     size = sum(_BUF_LEN.size + _nbytes(b) for b in bufs[start:])
@@ -246,7 +258,12 @@ class _Encoder:
     """One encoding pass: the buffers found so far and the item count."""
 
     def __init__(
-        self, buffers: list[Buffer], *, max_depth: int, max_items: int, figure_encoder: FigureEncoder | None
+        self,
+        buffers: list[Buffer],
+        *,
+        max_depth: int,
+        max_items: int,
+        figure_encoder: FigureEncoder | None,
     ) -> None:
         self.buffers = buffers
         self.max_depth = max_depth
@@ -263,7 +280,7 @@ class _Encoder:
             return self._dispatch(x, type(x), depth)
         except ProtocolError:
             raise
-        except (Exception, SystemExit, GeneratorExit) as exc:  # student code (repr, properties) raised
+        except _CAUGHT as exc:  # student code (repr, properties) raised
             del self.buffers[start:]
             return _unsupported(x, f"encoding raised {_type_name(type(exc))}")
 
@@ -281,7 +298,8 @@ class _Encoder:
             return {"$t": "complex", "re": _encode_float(x.real), "im": _encode_float(x.imag)}
         if t is str:
             if len(x) > MAX_STR_CHARS:
-                return _unsupported(x, f"str of {len(x)} characters exceeds the {MAX_STR_CHARS} limit")
+                reason = f"str of {len(x)} characters exceeds the {MAX_STR_CHARS} limit"
+                return _unsupported(x, reason)
             return x
         if t is list:
             return self._sequence(x, depth)
@@ -294,7 +312,8 @@ class _Encoder:
         if t is bytes:
             return {"$t": "bytes", "buf": self._add_buffer(x)}
         if t is Unsupported:
-            return {"$t": "unsupported", "type": _text(x.type), "repr": _text(x.repr), "reason": _text(x.reason)}
+            fields = {"type": _text(x.type), "repr": _text(x.repr), "reason": _text(x.reason)}
+            return {"$t": "unsupported", **fields}
         if _is_matplotlib(t):
             return self._matplotlib(x, t, depth)
         return _unsupported(x, _unsupported_reason(t))
@@ -323,30 +342,30 @@ class _Encoder:
 
     def _ndarray(self, x: np.ndarray) -> Tree:
         dtype = x.dtype
-        if (
-            dtype.kind not in "biufc"
-            or dtype.hasobject
-            or dtype.fields is not None
-            or dtype.subdtype is not None
-            or not _DTYPE_RE.fullmatch(dtype.str)
-        ):
-            return _unsupported(x, f"arrays of dtype {dtype.str} cannot cross; use a bool, int, float or complex dtype")
+        if not _plain_dtype(dtype) or not _DTYPE_RE.fullmatch(dtype.str):
+            reason = f"arrays of dtype {dtype.str} cannot cross; {_DTYPE_RULE}"
+            return _unsupported(x, reason)
         if x.ndim > MAX_NDIM:
             return _unsupported(x, f"arrays of more than {MAX_NDIM} dimensions cannot cross")
+        if x.nbytes > MAX_FRAME_BYTES:  # before copying: a broadcast view can be huge
+            reason = f"array of {_size(x.nbytes)} exceeds the {_size(MAX_FRAME_BYTES)} frame limit"
+            return _unsupported(x, reason)
         contiguous = x if x.flags.c_contiguous else x.copy(order="C")
         data = memoryview(contiguous.reshape(-1).view(np.uint8))
-        return {"$t": "nd", "dtype": dtype.str, "shape": list(x.shape), "buf": self._add_buffer(data)}
+        index = self._add_buffer(data)
+        return {"$t": "nd", "dtype": dtype.str, "shape": list(x.shape), "buf": index}
 
     def _matplotlib(self, x: object, t: type, depth: int) -> Tree:
         figure = _matplotlib_figure(x, t)
         if figure is None:
             return _unsupported(x, "matplotlib objects other than Figure and Axes cannot cross")
         if self.figure_encoder is None:
-            return _unsupported(x, "figures can only be encoded with a figure encoder (on the worker side)")
+            return _unsupported(x, "figures need a figure encoder (given on the worker side only)")
         try:
             data = self.figure_encoder(figure)
-        except (Exception, SystemExit, GeneratorExit) as exc:
-            return _unsupported(x, f"figure could not be converted: {_type_name(type(exc))}: {_safe_str(exc)}")
+        except _CAUGHT as exc:
+            error = f"{_type_name(type(exc))}: {_safe_str(exc)}"
+            return _unsupported(x, f"figure could not be converted: {error}")
         if type(data) is not dict or data.get("$t") != "figure":
             return _unsupported(x, "the figure encoder did not return figure data")
         pairs = [(k, v) for k, v in data.items() if k != "$t"]
@@ -369,7 +388,8 @@ def _encode_int(x: int) -> Tree:
         return x
     if bits > _MAX_INT_BITS:
         digits = int(bits * math.log10(2)) + 1
-        return _unsupported(x, f"int of about {digits} digits exceeds the {MAX_INT_DIGITS}-digit limit")
+        reason = f"int of about {digits} digits exceeds the {MAX_INT_DIGITS}-digit limit"
+        return _unsupported(x, reason)
     return {"$t": "int", "hex": hex(x)}
 
 
@@ -398,19 +418,26 @@ def _unsupported_reason(t: type) -> str:
     if issubclass(t, np.generic):
         return "numpy scalars of this kind cannot cross; return a number"
     if issubclass(t, (list, tuple, dict, int, float, complex, str, bytes)):
-        return "subclasses of built-in types cannot cross; return a plain list, tuple, dict, number or str"
-    return "values of this type cannot cross; return numbers, strings, lists, tuples, dicts or numpy arrays"
+        return (
+            "subclasses of built-in types cannot cross;"
+            " return a plain list, tuple, dict, number or str"
+        )
+    return (
+        "values of this type cannot cross;"
+        " return numbers, strings, lists, tuples, dicts or numpy arrays"
+    )
 
 
 def _is_matplotlib(t: type) -> bool:
-    """Whether ``t`` is defined in ``matplotlib`` or ``mpl_toolkits`` (by its ``__module__``, never isinstance)."""
+    """Whether ``t`` comes from matplotlib (by its ``__module__``: never isinstance)."""
     module = type.__getattribute__(t, "__module__")
     return type(module) is str and module.startswith(("matplotlib.", "mpl_toolkits."))
 
 
 def _unsupported(x: object, reason: str) -> dict[str, str]:
     """An ``"unsupported"`` node for ``x``; never raises."""
-    return {"$t": "unsupported", "type": _type_name(type(x)), "repr": _safe_repr(x), "reason": reason}
+    fields = {"type": _type_name(type(x)), "repr": _safe_repr(x), "reason": reason}
+    return {"$t": "unsupported", **fields}
 
 
 def _type_name(t: type) -> str:
@@ -422,7 +449,7 @@ def _type_name(t: type) -> str:
         if type(module) is str and module != "builtins":
             return f"{module}.{qualname}"[:_MAX_REPR_CHARS]
         return qualname[:_MAX_REPR_CHARS]
-    except (Exception, SystemExit, GeneratorExit):
+    except _CAUGHT:
         return "?"
 
 
@@ -430,14 +457,14 @@ def _safe_repr(x: object) -> str:
     """A short repr of ``x``; never raises, whatever ``__repr__`` does."""
     try:
         return _text(_REPR.repr(x))[:_MAX_REPR_CHARS]
-    except (Exception, SystemExit, GeneratorExit) as exc:
+    except _CAUGHT as exc:
         return f"<{_type_name(type(x))} object; repr raised {_type_name(type(exc))}>"
 
 
 def _safe_str(exc: BaseException) -> str:
     try:
         return _text(str(exc))[:_MAX_REPR_CHARS]
-    except (Exception, SystemExit, GeneratorExit):
+    except _CAUGHT:
         return "?"
 
 
@@ -466,7 +493,8 @@ def decode(
     Only ``None``, ``bool``, ``int``, ``float``, ``complex``, ``str``,
     ``bytes``, ``list``, ``tuple``, ``dict``, base-class ``ndarray`` (via
     ``np.frombuffer(...).copy()``) and :class:`Unsupported` are ever built.
-    Figure nodes become plain dicts. Raises :class:`ProtocolError` naming
+    Figure nodes become plain dicts (with ``"$t": "figure"`` and ``"png"``
+    as bytes). Raises :class:`ProtocolError` naming
     what was wrong for any malformed tree.
     """
     decoder = _Decoder(buffers, max_depth=max_depth, max_items=max_items)
@@ -526,7 +554,8 @@ class _Decoder:
             tag = node["$t"]
             handler = self.handlers.get(tag) if type(tag) is str else None
             if handler is None:
-                raise ProtocolError(f"unknown tag {_short(tag)}; expected one of {sorted(self.handlers)}")
+                known = sorted(self.handlers)
+                raise ProtocolError(f"unknown tag {_short(tag)}; expected one of {known}")
             return handler(node, depth)
         raise ProtocolError(f"tree node of type {_type_name(t)} is not JSON")
 
@@ -552,7 +581,9 @@ class _Decoder:
         _expect_keys(node, {"hex"})
         s = node["hex"]
         if type(s) is not str or len(s) > _MAX_HEX_CHARS or not _HEX_RE.fullmatch(s):
-            raise ProtocolError(f"'int' tag needs a lower-case hex string of at most {_MAX_HEX_CHARS} characters")
+            raise ProtocolError(
+                f"'int' tag needs a lower-case hex string of at most {_MAX_HEX_CHARS} characters"
+            )
         return int(s, 16)
 
     def _complex(self, node: dict, depth: int) -> complex:
@@ -576,7 +607,7 @@ class _Decoder:
         out: dict[str, object] = {}
         for pair in items:
             if type(pair) is not list or len(pair) != 2 or type(pair[0]) is not str:
-                raise ProtocolError("'dict' items must be a list of [key, value] pairs with str keys")
+                raise ProtocolError("'dict' items must be [key, value] pairs with str keys")
             key = _check_key(pair[0])
             if key in out:
                 raise ProtocolError(f"'dict' has the key {_short(key)} twice")
@@ -590,9 +621,10 @@ class _Decoder:
         index = node["buf"]
         data = self._take(index)
         count = math.prod(shape)
-        if count * dtype.itemsize != data.nbytes:
+        needed = count * dtype.itemsize
+        if needed != data.nbytes:
             raise ProtocolError(
-                f"array of shape {tuple(shape)} and dtype {dtype.str} needs {count * dtype.itemsize} bytes;"
+                f"array of shape {tuple(shape)} and dtype {dtype.str} needs {needed} bytes;"
                 f" buffer {index} has {data.nbytes}"
             )
         try:
@@ -606,7 +638,10 @@ class _Decoder:
 
     def _figure(self, node: dict, depth: int) -> dict:
         self._enter(depth, len(node) - 1)
-        out = {_check_key(k): self.decode(v, depth + 1) for k, v in node.items() if k != "$t"}
+        out: dict[str, object] = {"$t": "figure"}
+        for k, v in node.items():
+            if k != "$t":
+                out[_check_key(k)] = self.decode(v, depth + 1)
         if type(out.get("axes")) is not list:
             raise ProtocolError("'figure' needs 'axes', a list")
         if type(out.get("png")) is not bytes:
@@ -624,7 +659,8 @@ class _Decoder:
 
     def _take(self, index: object) -> memoryview:
         if type(index) is not int or not 0 <= index < len(self.buffers):
-            raise ProtocolError(f"buffer index {_short(index)} is not one of the {len(self.buffers)} buffers")
+            n = len(self.buffers)
+            raise ProtocolError(f"buffer index {_short(index)} is not one of the {n} buffers")
         if self.used[index]:
             raise ProtocolError(f"buffer {index} is referenced twice")
         self.used[index] = True
@@ -637,7 +673,7 @@ class _Decoder:
         return view if view.format == "B" and view.ndim == 1 else view.cast("B")
 
 
-def _expect_keys(node: dict, required: set[str], *, optional: frozenset[str] | set[str] = frozenset()) -> None:
+def _expect_keys(node: dict, required: set[str], *, optional: Set[str] = frozenset()) -> None:
     keys = set(node) - {"$t"}
     if not required <= keys or not keys <= required | optional:
         tag = node["$t"]
@@ -650,19 +686,29 @@ def _float_part(v: object, name: str) -> float:
         return v
     if type(v) is dict and set(v) == {"$t", "v"} and v["$t"] == "float" and v["v"] in _NONFINITE:
         return _NONFINITE[v["v"]]
-    raise ProtocolError(f"'complex' part {name!r} must be a float or a 'float' tag; got {_short(v)}")
+    raise ProtocolError(f"'complex' part {name!r} must be a float or 'float' tag; got {_short(v)}")
 
 
 def _check_dtype(s: object) -> np.dtype:
     if type(s) is not str or not _DTYPE_RE.fullmatch(s):
-        raise ProtocolError(f"array dtype {_short(s)} is not allowed; only bool, int, uint, float and complex")
+        raise ProtocolError(f"array dtype {_short(s)} is not allowed; {_DTYPE_RULE}")
     try:
         dtype = np.dtype(s)
     except TypeError:
         raise ProtocolError(f"array dtype {s!r} is not understood") from None
-    if dtype.kind not in "biufc" or dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
-        raise ProtocolError(f"array dtype {s!r} is not allowed; only bool, int, uint, float and complex")
+    if not _plain_dtype(dtype):
+        raise ProtocolError(f"array dtype {s!r} is not allowed; {_DTYPE_RULE}")
     return dtype
+
+
+def _plain_dtype(dtype: np.dtype) -> bool:
+    """Bool, int, uint, float or complex, without objects, fields or sub-arrays."""
+    return (
+        dtype.kind in "biufc"
+        and not dtype.hasobject
+        and dtype.fields is None
+        and dtype.subdtype is None
+    )
 
 
 def _check_shape(shape: object) -> list[int]:
@@ -696,7 +742,13 @@ def _short(x: object) -> str:
 # framing
 
 
-def send_frame(sock: socket.socket, tree: Tree, buffers: Sequence[Buffer], *, max_bytes: int = MAX_FRAME_BYTES) -> int:
+def send_frame(
+    sock: socket.socket,
+    tree: Tree,
+    buffers: Sequence[Buffer],
+    *,
+    max_bytes: int = MAX_FRAME_BYTES,
+) -> int:
     """Send one frame holding ``tree`` and ``buffers``; return its size in bytes.
 
     Raises :class:`ProtocolError` before sending anything if the tree is not
@@ -705,9 +757,10 @@ def send_frame(sock: socket.socket, tree: Tree, buffers: Sequence[Buffer], *, ma
     """
     lengths = [_nbytes(b) for b in buffers]
     try:
-        header = json.dumps({"v": tree, "bufs": lengths}, allow_nan=False, separators=(",", ":")).encode("ascii")
+        text = json.dumps({"v": tree, "bufs": lengths}, allow_nan=False, separators=(",", ":"))
     except (TypeError, ValueError, RecursionError) as exc:
         raise ProtocolError(f"tree is not plain JSON: {exc}") from None
+    header = text.encode("ascii")  # ensure_ascii: lone surrogates are escaped, not lost
     total = _HEADER_LEN.size + len(header) + sum(_BUF_LEN.size + n for n in lengths)
     if total > max_bytes:
         raise ProtocolError(f"frame of {_size(total)} exceeds the {_size(max_bytes)} limit")
@@ -740,18 +793,23 @@ def recv_frame(
     deadline = None if timeout is None else time.monotonic() + timeout
     previous = sock.gettimeout()
     try:
-        (header_len,) = _HEADER_LEN.unpack(_recv_exactly(sock, _HEADER_LEN.size, deadline, "frame length"))
+        raw = _recv_exactly(sock, _HEADER_LEN.size, deadline, "frame length")
+        (header_len,) = _HEADER_LEN.unpack(raw)
         if _HEADER_LEN.size + header_len > max_bytes:
-            raise ProtocolError(f"frame header of {_size(header_len)} exceeds the {_size(max_bytes)} limit")
+            limit = _size(max_bytes)
+            raise ProtocolError(f"frame header of {_size(header_len)} exceeds the {limit} limit")
         tree, lengths = _parse_header(_recv_exactly(sock, header_len, deadline, "frame header"))
         total = _HEADER_LEN.size + header_len + sum(_BUF_LEN.size + n for n in lengths)
         if total > max_bytes:
             raise ProtocolError(f"frame of {_size(total)} exceeds the {_size(max_bytes)} limit")
         buffers = []
         for i, n in enumerate(lengths):
-            (announced,) = _BUF_LEN.unpack(_recv_exactly(sock, _BUF_LEN.size, deadline, f"length of buffer {i}"))
+            raw = _recv_exactly(sock, _BUF_LEN.size, deadline, f"length of buffer {i}")
+            (announced,) = _BUF_LEN.unpack(raw)
             if announced != n:
-                raise ProtocolError(f"buffer {i} is {n} bytes in the header but {announced} in its prefix")
+                raise ProtocolError(
+                    f"buffer {i} is {n} bytes in the header but {announced} in its prefix"
+                )
             buffers.append(_recv_exactly(sock, n, deadline, f"buffer {i}"))
         return tree, buffers
     finally:
@@ -773,7 +831,9 @@ def send_message(
     Raises :class:`ProtocolError` before sending anything if ``obj`` is over a
     limit.
     """
-    tree, buffers = encode(obj, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder)
+    tree, buffers = encode(
+        obj, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder
+    )
     return send_frame(sock, tree, buffers, max_bytes=max_bytes)
 
 
@@ -798,7 +858,7 @@ def _recv_exactly(sock: socket.socket, n: int, deadline: float | None, what: str
         if deadline is not None:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise TimeoutError(f"timed out waiting for the {what} ({got} of {n} bytes received)")
+                raise TimeoutError(f"timed out waiting for the {what} ({got} of {n} bytes read)")
             sock.settimeout(remaining)
         k = sock.recv_into(view[got:])
         if k == 0:
@@ -814,7 +874,10 @@ def _parse_header(raw: bytearray) -> tuple[Tree, list[int]]:
         raise ProtocolError("frame header is not UTF-8") from None
     try:
         header = json.loads(
-            text, parse_constant=_reject_constant, parse_int=_parse_int, object_pairs_hook=_unique_keys
+            text,
+            parse_constant=_reject_constant,
+            parse_int=_parse_int,
+            object_pairs_hook=_unique_keys,
         )
     except RecursionError:
         raise ProtocolError("frame header is nested too deeply") from None
@@ -837,15 +900,15 @@ def _reject_constant(name: str) -> float:
 
 def _parse_int(s: str) -> int:
     if len(s) > _JSON_INT_CHARS:
-        raise ProtocolError(f"JSON number of {len(s)} digits; ints over 1024 bits must use the 'int' tag")
+        raise ProtocolError(f"JSON int of {len(s)} digits; ints over 1024 bits use the 'int' tag")
     return int(s)
 
 
 def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out = dict(pairs)
     if len(out) != len(pairs):
-        seen: set[str] = set()
-        duplicate = next(k for k, _ in pairs if k in seen or seen.add(k))
+        counts = collections.Counter(k for k, _ in pairs)
+        duplicate = next(k for k, n in counts.items() if n > 1)
         raise ProtocolError(f"frame header has the key {_short(duplicate)} twice in one object")
     return out
 

@@ -26,35 +26,28 @@ from pathlib import Path
 from typing import Any
 
 import nbformat
-from nbgrader.nbgraderformat import ValidationError as MetadataError
-from nbgrader.preprocessors import (
-    CheckCellMetadata,
-    ClearHiddenTests,
-    ClearMarkScheme,
-    ClearOutput,
-    ClearSolutions,
-    ComputeChecksums,
-    LockCells,
-)
 
 from autograder.assignment import Assignment
 from autograder.errors import AssignmentError
 
 __all__ = ["release", "student_template", "PREPROCESSORS", "FORBIDDEN_MARKERS"]
 
-#: The passes of ``nbgrader generate_assignment`` that need no course or database,
-#: in nbgrader's order (``converters/generate_assignment.py``). Checksums are
-#: computed again after the hidden tests are cleared, as nbgrader does.
+#: The passes of ``nbgrader generate_assignment`` that need no course or database
+#: (classes of ``nbgrader.preprocessors``), in nbgrader's order
+#: (``converters/generate_assignment.py``). Checksums are computed again after
+#: the hidden tests are cleared, as nbgrader does. Left out: IncludeHeaderFooter
+#: and InstantiateTests (need course configuration), SaveCells (needs the
+#: gradebook database).
 PREPROCESSORS = (
-    LockCells,
-    ClearSolutions,
-    ClearOutput,
-    CheckCellMetadata,
-    ComputeChecksums,
-    ClearHiddenTests,
-    ClearMarkScheme,
-    ComputeChecksums,
-    CheckCellMetadata,
+    "LockCells",
+    "ClearSolutions",
+    "ClearOutput",
+    "CheckCellMetadata",
+    "ComputeChecksums",
+    "ClearHiddenTests",
+    "ClearMarkScheme",
+    "ComputeChecksums",
+    "CheckCellMetadata",
 )
 #: Text that must never appear in a released notebook.
 FORBIDDEN_MARKERS = ("BEGIN SOLUTION", "END SOLUTION", "BEGIN HIDDEN TESTS",
@@ -84,14 +77,18 @@ def student_template(assignment: Assignment) -> nbformat.NotebookNode:
         The instructor notebook cannot be read, or nbgrader rejects it (for
         example a solution region outside a solution cell).
     """
+    # nbgrader is imported here: it is slow to import and only releasing needs it.
+    from nbgrader import preprocessors
+    from nbgrader.nbgraderformat import ValidationError as MetadataError
+
     nb = _read_instructor(assignment.notebook)
     resources: dict[str, Any] = {}
-    for preprocessor in PREPROCESSORS:
+    for name in PREPROCESSORS:
         try:
-            nb, resources = preprocessor(log=_LOG).preprocess(nb, resources)
+            nb, resources = getattr(preprocessors, name)(log=_LOG).preprocess(nb, resources)
         except (RuntimeError, ValueError, MetadataError, KeyError) as exc:
             raise AssignmentError(
-                f"{assignment.notebook}: nbgrader's {preprocessor.__name__} failed: {exc}. "
+                f"{assignment.notebook}: nbgrader's {name} failed: {exc}. "
                 "Check the cell's nbgrader metadata (Create Assignment toolbar) and its "
                 "### BEGIN/END markers.") from None
     _verify_template(assignment, nb, where="the student template")
@@ -210,10 +207,10 @@ def _hidden_files(assignment: Assignment) -> list[Path]:
                   if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc")
 
 
-def _distinctive_lines(assignment: Assignment) -> set[str]:
-    """Long, non-import lines of the hidden checks."""
+def _long_lines(paths: list[Path]) -> set[str]:
+    """Stripped lines of the ``.py`` files in ``paths`` that are long and not imports."""
     lines: set[str] = set()
-    for path in _hidden_files(assignment):
+    for path in paths:
         if path.suffix != ".py":
             continue
         for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
@@ -221,6 +218,11 @@ def _distinctive_lines(assignment: Assignment) -> set[str]:
             if len(line) >= _DISTINCTIVE and not line.startswith(("import ", "from ", "#")):
                 lines.add(line)
     return lines
+
+
+def _distinctive_lines(assignment: Assignment) -> set[str]:
+    """Long lines of the hidden checks that no public check also has."""
+    return _long_lines(_hidden_files(assignment)) - _long_lines(_public_files(assignment))
 
 
 def _verify_template(assignment: Assignment, nb: nbformat.NotebookNode, *, where: str) -> None:

@@ -382,11 +382,19 @@ def readable_paths(exclude: Sequence[Path], *, extra: Sequence[Path] = ()) -> li
     list of Path
         Resolved, existing paths; none inside another, none covering an excluded path.
     """
+    return list(_readable_paths_cached(tuple(map(str, exclude)), tuple(map(str, extra))))
+
+
+@functools.lru_cache(maxsize=16)
+def _readable_paths_cached(exclude: tuple[str, ...], extra: tuple[str, ...]) -> tuple[Path, ...]:
+    # Walking site-packages costs tens of milliseconds; the warm parent computes the
+    # list once and every forked child inherits the cache (sys.path is fixed by then).
     holes = {_resolve(p) for p in exclude}
     holes.update(_hidden_installed_paths(), map(Path, SYSTEM_SECRETS))
-    roots = _outermost([root for root in _candidate_roots(extra) if root.exists()])
+    roots = _outermost([root for root in _candidate_roots([Path(e) for e in extra]) if root.exists()])
     seen: set[Path] = set()
-    return _outermost([path for root in roots for path in _allowed_beneath(root, holes, seen)])
+    return tuple(_outermost([path for root in roots
+                             for path in _allowed_beneath(root, holes, seen)]))
 
 
 def _candidate_roots(extra: Sequence[Path]) -> list[Path]:

@@ -141,7 +141,8 @@ def scan(sources: Sequence[str], forbid: Sequence[str]) -> ScanReport:
     Raises
     ------
     UsageError
-        When a ``forbid`` entry is not a dotted name (a grader setting).
+        When a ``forbid`` entry is not a dotted name (a grader setting), or a
+        source is not a string.
 
     Examples
     --------
@@ -152,6 +153,9 @@ def scan(sources: Sequence[str], forbid: Sequence[str]) -> ScanReport:
     """
     analyzer = _Analyzer(_checked_forbid(forbid))
     for index, source in enumerate(sources):
+        if not isinstance(source, str):
+            raise UsageError(f"`sources` must hold strings; item {index} is "
+                             f"{type(source).__name__}.")
         analyzer.add_cell(index, source)
     return analyzer.report()
 

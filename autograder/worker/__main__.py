@@ -116,6 +116,9 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     if not isinstance(request, dict) or request.get("op") != "spawn" or len(fds) != 1:
         return False
     sub = socket.socket(fileno=fds[0])
+    # Computed here, once, so every forked child inherits the cached list.
+    sandbox.readable_paths([Path(p) for p in request.get("exclude", [])],
+                           extra=[Path(p) for p in request.get("policy", {}).get("allowed_read", [])])
     pid = os.fork()
     if pid == 0:
         control.close()

@@ -29,12 +29,13 @@ from __future__ import annotations
 import io
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 import matplotlib
 
-if "matplotlib.pyplot" not in sys.modules:  # never switch an already chosen backend: it closes figures
+# Switching the backend after pyplot is imported closes every figure: only choose it first.
+if "matplotlib.pyplot" not in sys.modules:
     matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
@@ -44,7 +45,13 @@ from matplotlib.colors import to_hex  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.path import Path  # noqa: E402
 
-__all__ = ["figure_to_data", "open_figures_data", "close_all"]
+__all__ = [
+    "figure_to_data",
+    "open_figures_data",
+    "figures_data",
+    "open_figure_numbers",
+    "close_all",
+]
 
 DEFAULT_DPI = 72
 DEFAULT_MAX_POINTS = 200_000
@@ -52,6 +59,7 @@ DEFAULT_MAX_POINTS = 200_000
 MAX_PNG_PIXELS = 4_000_000
 
 _SKIP_CODES = (Path.STOP, Path.CLOSEPOLY)
+_IDENTITY = object()  # marks "already in data coordinates"
 
 
 class _Skip(Exception):
@@ -74,12 +82,16 @@ class _Budget:
         return k
 
 
-def figure_to_data(fig: Figure, *, dpi: float = DEFAULT_DPI, max_points: int = DEFAULT_MAX_POINTS) -> dict:
+def figure_to_data(
+    fig: Figure, *, dpi: float = DEFAULT_DPI, max_points: int = DEFAULT_MAX_POINTS
+) -> dict:
     """Read a figure's data (see the module docstring) and render it as PNG.
 
     ``max_points`` caps the points kept over the whole figure (line points,
     offsets, path vertices, collection values); when it cuts anything,
-    ``"truncated"`` is True. Raises ``TypeError`` only if ``fig`` is not a
+    ``"truncated"`` is True. The PNG is rendered at ``dpi`` (lower for a
+    figure of more than ``MAX_PNG_PIXELS``); if rendering fails, ``"png"`` is
+    ``b""`` with a note. Raises ``TypeError`` only if ``fig`` is not a
     ``matplotlib.figure.Figure``; problems with single artists become notes.
     """
     if not isinstance(fig, Figure):
@@ -99,9 +111,19 @@ def figure_to_data(fig: Figure, *, dpi: float = DEFAULT_DPI, max_points: int = D
     }
 
 
-def open_figures_data(*, dpi: float = DEFAULT_DPI, max_points: int = DEFAULT_MAX_POINTS) -> list[dict]:
-    """Data of every open pyplot figure, in figure-number order."""
-    numbers = plt.get_fignums()
+def open_figures_data(
+    *,
+    exclude: Collection[int] = (),
+    dpi: float = DEFAULT_DPI,
+    max_points: int = DEFAULT_MAX_POINTS,
+) -> list[dict]:
+    """Data of every open pyplot figure whose number is not in ``exclude``, by number.
+
+    With ``exclude=open_figure_numbers()`` taken before a call, this gives the
+    figures the call created.
+    """
+    excluded = set(exclude)
+    numbers = [n for n in plt.get_fignums() if n not in excluded]
     if not numbers:
         return []
     current = plt.gcf()
@@ -118,6 +140,15 @@ def open_figures_data(*, dpi: float = DEFAULT_DPI, max_points: int = DEFAULT_MAX
     return data
 
 
+#: The name :mod:`autograder.worker.serve` uses.
+figures_data = open_figures_data
+
+
+def open_figure_numbers() -> list[int]:
+    """Numbers of the open pyplot figures."""
+    return list(plt.get_fignums())
+
+
 def close_all() -> None:
     """Close every pyplot figure."""
     plt.close("all")
@@ -131,16 +162,18 @@ def _axes_data(ax: Axes, budget: _Budget, notes: list[str], where: str) -> dict:
     def field(name: str, fn: Callable[[], Any], default: Any) -> Any:
         return _attempt(notes, f"{where}: {name}", fn, default)
 
+    def each(kind: str, artists: Callable[[], Any], read: Callable[[Any], Any]) -> list:
+        found = field(f"{kind}s", lambda: list(artists()), [])
+        return _each(notes, f"{where}: {kind}", found, read)
+
     return {
-        "lines": _each(notes, where, "line", field("lines", lambda: list(ax.get_lines()), []),
-                       lambda a: _line_data(a, budget)),
-        "collections": _each(notes, where, "collection", field("collections", lambda: list(ax.collections), []),
-                             lambda a: _collection_data(a, ax, budget)),
-        "patches": _each(notes, where, "patch", field("patches", lambda: list(ax.patches), []),
-                         lambda a: _patch_data(a, ax, budget)),
-        "images": _each(notes, where, "image", field("images", lambda: list(ax.images), []), _image_data),
-        "texts": _each(notes, where, "text", field("texts", lambda: list(ax.texts), []),
-                       lambda a: _text(a.get_text())),
+        "lines": each("line", ax.get_lines, lambda a: _line_data(a, budget)),
+        "collections": each(
+            "collection", lambda: ax.collections, lambda a: _collection_data(a, ax, budget)
+        ),
+        "patches": each("patch", lambda: ax.patches, lambda a: _patch_data(a, ax, budget)),
+        "images": each("image", lambda: ax.images, _image_data),
+        "texts": each("text", lambda: ax.texts, lambda a: _text(a.get_text())),
         "xlim": field("xlim", lambda: [float(v) for v in ax.get_xlim()], [math.nan, math.nan]),
         "ylim": field("ylim", lambda: [float(v) for v in ax.get_ylim()], [math.nan, math.nan]),
         "xlabel": field("xlabel", lambda: _text(ax.get_xlabel()), ""),
@@ -186,7 +219,9 @@ def _offsets(coll: Any, ax: Axes) -> np.ndarray:
     if to_data is None:
         return np.empty((0, 2))
     offsets = _points(coll.get_offsets())
-    return offsets if to_data is _IDENTITY else np.array(to_data.transform(offsets), dtype=np.float64)
+    if to_data is _IDENTITY:
+        return offsets
+    return np.array(to_data.transform(offsets), dtype=np.float64)
 
 
 def _segments(coll: Any, ax: Axes, budget: _Budget) -> list[np.ndarray]:
@@ -227,10 +262,10 @@ def _patch_data(patch: Any, ax: Axes, budget: _Budget) -> dict:
 
 
 def _image_data(image: Any) -> dict:
-    return {"shape": [int(n) for n in np.shape(image.get_array())], "extent": [float(v) for v in image.get_extent()]}
-
-
-_IDENTITY = object()
+    return {
+        "shape": [int(n) for n in np.shape(image.get_array())],
+        "extent": [float(v) for v in image.get_extent()],
+    }
 
 
 def _to_data_transform(transform: Any, ax: Axes) -> Any:
@@ -336,15 +371,23 @@ def _attempt(notes: list[str], what: str, fn: Callable[[], Any], default: Any) -
         return default
 
 
-def _each(notes: list[str], where: str, kind: str, artists: list, fn: Callable[[Any], Any]) -> list:
+def _each(notes: list[str], what: str, artists: list, read: Callable[[Any], Any]) -> list:
+    """``read`` of each artist; one that fails is skipped with a note."""
     out = []
     for i, artist in enumerate(artists):
         try:
-            out.append(fn(artist))
+            out.append(read(artist))
         except Exception as exc:
-            notes.append(f"{where}: {kind} {i} skipped: {_describe(exc)}")
+            notes.append(f"{what} {i} skipped: {_describe(exc)}")
     return out
 
 
 def _empty_figure(note: str) -> dict:
-    return {"$t": "figure", "axes": [], "suptitle": "", "png": b"", "truncated": False, "notes": [note]}
+    return {
+        "$t": "figure",
+        "axes": [],
+        "suptitle": "",
+        "png": b"",
+        "truncated": False,
+        "notes": [note],
+    }

@@ -71,8 +71,9 @@ class FakeTarget:
         return []
 
 
-@pytest.fixture
-def results(tmp_path: Path) -> dict[str, Any]:
+@pytest.fixture(scope="module")
+def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    tmp_path = tmp_path_factory.mktemp("plugin")
     hidden = tmp_path / "checks" / "hidden"
     hidden.mkdir(parents=True)
     (hidden / "test_demo.py").write_text(CHECKS)

@@ -404,6 +404,8 @@ HOSTILE = {
     "class": lambda: int,
     "huge-int": lambda: 10**10_001,
     "huge-str": lambda: "x" * (MAX_STR_CHARS + 1),
+    "huge-broadcast-view": lambda: np.broadcast_to(np.float64(1), (10**12,)),
+    "memmap-subclass": lambda: np.zeros(2).view(np.memmap),
     "fake-figure": FakeFigure,
 }
 
@@ -498,7 +500,7 @@ def test_figure_node_decodes_to_a_plain_dict():
         return {"$t": "figure", "axes": [{"x": np.arange(3.0)}], "png": b"\x89PNG", "truncated": False}
 
     got = roundtrip([FakeFigure()], figure_encoder=encoder)
-    assert list(got[0]) == ["axes", "png", "truncated"]
+    assert list(got[0]) == ["$t", "axes", "png", "truncated"] and got[0]["$t"] == "figure"
     assert got[0]["png"] == b"\x89PNG"
     assert_same(got[0]["axes"][0]["x"], np.arange(3.0))
 

@@ -146,14 +146,14 @@ PROBLEMS: dict[str, tuple[object, dict[str, object]]] = {
     "forged-values": (nb(LIAR), {"score": "0", "outcome": "graded", "contains": ["cannot read"]}),
     "patch-numpy": (nb(
         "import numpy as np\nnp.allclose = lambda *a, **k: True\nnp.array_equal = lambda *a, **k: True\n"
-        "def orientation(p, q, r):\n    return 1\ndef convex_hull(points):\n    return [0]"),
+        "def orientation(p, q, r):\n    return 7\ndef convex_hull(points):\n    return [-1]"),
         {"score": "0", "outcome": "graded"}),
     "forged-results": (nb(
         "import json, os\nfake = {'score': 100, 'max_score': 100, 'tests': []}\n"
         "for path in ['results.json', '../results.json', '../../results.json', '/tmp/results.json']:\n"
         "    try:\n        json.dump(fake, open(path, 'w'))\n    except OSError:\n        pass\n"
         "print('Points 100/100')\nprint(json.dumps(fake))",
-        "def orientation(p, q, r):\n    return 0\ndef convex_hull(points):\n    return []"),
+        "def orientation(p, q, r):\n    return 5\ndef convex_hull(points):\n    return []"),
         {"score": "0", "outcome": "graded"}),
     "generator-result": (nb(
         "def orientation(p, q, r):\n    yield 1\ndef convex_hull(points):\n    return (i for i in range(3))"),

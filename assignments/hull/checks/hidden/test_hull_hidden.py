@@ -130,7 +130,9 @@ def _unseen_near_collinear(rng, count=10):
 
 
 def _float_sign(p, q, r):
-    det = (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+    """The sign of the determinant in plain floats, pivot p: what a naive answer says."""
+    dqx, dqy, drx, dry = q[0] - p[0], q[1] - p[1], r[0] - p[0], r[1] - p[1]
+    det = dqx * dry - dqy * drx
     return (det > 0) - (det < 0)
 
 
@@ -143,7 +145,9 @@ class Triples:
 
 TRIPLES = {
     "integer-turns": Triples(_integer_turns, 1),
-    "float-collinear": Triples(_float_collinear, 1),
+    "float-collinear": Triples(_float_collinear, 1,
+                               "Compare the exact determinant with 0: a tolerance calls "
+                               "points that turn by a hair collinear."),
     "kettner-ulp": Triples(_kettner_ulp, 2, NEAR_COLLINEAR_HINT),
     "scaled-triangles": Triples(_scaled_triangles, 1,
                                 "Tiny or huge coordinates: compare the exact determinant with "

@@ -19,6 +19,7 @@ import numpy as np
 
 from autograder.compare import (
     CheckFailure,
+    describe,
     expect_array,
     expect_int,
     is_rotation_reversed,
@@ -47,12 +48,23 @@ def _at(points: np.ndarray, i: int) -> str:
     return f"point {i} at {show_point(points[i])}"
 
 
+def _sentence(text: str) -> str:
+    return text[:1].upper() + text[1:] + "."
+
+
 def _as_indices(got: Any, n: int) -> list[int]:
     """The answer as a list of valid row indices, or a CheckFailure saying what is wrong."""
+    hint = " Return the row numbers of the corner pins, like [2, 1, 4], not their coordinates."
     if isinstance(got, (list, tuple, np.ndarray)) and len(got) == 0:
         raise CheckFailure(f"{NAME} returned an empty list; every set of pins has at least "
                            "one hull corner.")
-    arr = expect_array(got, shape=(None,), dtype_kind="iu", name=NAME)
+    try:
+        arr = expect_array(got, dtype_kind="iu", name=NAME)
+    except CheckFailure as exc:
+        raise CheckFailure(f"{exc}{hint}") from None
+    if arr.ndim != 1:
+        raise CheckFailure(f"{NAME} should be a flat list of indices; got {describe(got)}."
+                           + hint)
     bad = [int(i) for i in arr if not 0 <= int(i) < n]
     if bad:
         raise CheckFailure(f"{NAME} returned index {bad[0]}, which is not a row of `points`: "
@@ -107,8 +119,7 @@ def judge_hull(got: Any, points: np.ndarray, expected: Sequence[int],
                            f"{expected[0]}): smallest x, then smallest y")
 
     fraction = float(np.prod([FRACTIONS[k] for k in issues])) if issues else 1.0
-    message = "; ".join(issues.values())
-    return fraction, (message[:1].upper() + message[1:] + "." if message else "")
+    return fraction, (_sentence("; ".join(issues.values())) if issues else "")
 
 
 def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int],
@@ -129,8 +140,8 @@ def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int]
                            + "; ".join(parts) + ".")
     twice = next((v for v in collapsed if collapsed.count(v) > 1), None)
     if twice is not None and len(expected) > 2:
-        raise CheckFailure(f"{_at(points, twice)} appears {collapsed.count(twice)} times in "
-                           "your hull; the band passes each corner once.")
+        raise CheckFailure(_sentence(f"{_at(points, twice)} appears {collapsed.count(twice)} "
+                                     "times in your hull; the band passes each corner once"))
 
 
 def _check_order(collapsed: list[int], order: list[int], points: np.ndarray,
@@ -179,6 +190,10 @@ def _show_number(c: float) -> str:
     return repr(int(c)) if c.is_integer() and abs(c) < 2.0**53 else repr(c)
 
 
+def _signed(value: int) -> str:
+    return f"{value:+d}" if value else "0"
+
+
 def judge_turn(got: Any, p: Any, q: Any, r: Any, expected: int, *, hint: str = "") -> None:
     """Raise CheckFailure unless ``got`` is the integer ``expected`` (+1, -1 or 0)."""
     call = f"orientation({show_point(p)}, {show_point(q)}, {show_point(r)})"
@@ -187,5 +202,6 @@ def judge_turn(got: Any, p: Any, q: Any, r: Any, expected: int, *, hint: str = "
         raise CheckFailure(f"{call} returned {value}; return only the sign of the "
                            "determinant: +1, -1 or 0.")
     if value != expected:
-        raise CheckFailure(f"{call} returned {value:+d}; expected {expected:+d}: the points "
-                           f"make {TURN_WORDS[expected]}." + (f" {hint}" if hint else ""))
+        raise CheckFailure(f"{call} returned {_signed(value)}; expected {_signed(expected)}: "
+                           f"the points make {TURN_WORDS[expected]}."
+                           + (f" {hint}" if hint else ""))

@@ -1,0 +1,457 @@
+"""Hidden checks for the Delaunay assignment: the real grading.
+
+in_circle: exact answers on cocircular points (a point on the circle is not
+strictly inside) and on points a few units in the last place (ulps) off a
+circle, where the floating-point determinant has the wrong sign.
+
+delaunay: named point sets. Where no four points are cocircular the Delaunay
+triangulation is unique: the answer is compared, as a set of triangles, with
+``reference.delaunay`` (exact arithmetic), itself cross-checked with
+``scipy.spatial.Delaunay``. Where points are cocircular (grid, circle) many
+triangulations are valid, so the answer is judged by its properties, all
+tested exactly: counter-clockwise non-degenerate triangles, 2n - 2 - h of
+them, covering the convex hull, every interior edge locally Delaunay (which
+makes every circumcircle empty), and ``reference.delaunay.is_delaunay`` as the
+final word. Sets named ``random-*`` and ``unseen-*`` are drawn from the ``rng``
+fixture: a regrade draws the same points, another submission draws others.
+
+plot_on_mesh: the figure must fill the mesh with colours spanning the values.
+
+References
+----------
+J. R. Shewchuk, "Adaptive precision floating-point arithmetic and fast robust
+geometric predicates", Discrete & Computational Geometry 18, 305-363, 1997.
+doi:10.1007/PL00009321
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from autograder.compare import CheckFailure
+from reference.delaunay import _incircle_many, delaunay, incircle, is_delaunay
+from reference.geometry import _orient2d_many
+
+
+def _load_feedback():
+    """The feedback module shared with the public checks (loaded by path, any import mode)."""
+    path = Path(__file__).resolve().parents[1] / "public" / "delaunay_feedback.py"
+    spec = importlib.util.spec_from_file_location("delaunay_checks_feedback", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+fb = _load_feedback()
+
+LAKE_CSV = Path(__file__).resolve().parents[2] / "data" / "lake.csv"
+#: a UTM-like origin (metres): large coordinates, small differences
+UTM_ORIGIN = np.array([512_000.0, 5_270_000.0])
+EXACT_HINT = ("These points are within a few units in the last place of one circle: a "
+              "floating-point determinant can have the wrong sign here, so compute it "
+              "exactly (Fraction).")
+
+
+# ---------------------------------------------------------------------------
+# in_circle cases: (a, b, c, d) with a, b, c counter-clockwise
+# ---------------------------------------------------------------------------
+
+def _integer_circle(r: int) -> list[tuple[int, int]]:
+    """Every integer point on the circle of radius ``r``, counter-clockwise from angle -pi."""
+    pts = [(x, y) for x in range(-r, r + 1) for y in range(-r, r + 1) if x * x + y * y == r * r]
+    return sorted(pts, key=lambda p: np.arctan2(p[1], p[0]))
+
+
+CIRCLE_65 = _integer_circle(65)  # 36 points: exactly cocircular integers
+
+
+def _float_inside(a, b, c, d) -> bool:
+    """The textbook determinant (translated to d) in floating point: what the checks fool."""
+    adx, ady, bdx, bdy = a[0] - d[0], a[1] - d[1], b[0] - d[0], b[1] - d[1]
+    cdx, cdy = c[0] - d[0], c[1] - d[1]
+    det = ((adx * adx + ady * ady) * (bdx * cdy - cdx * bdy)
+           + (bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy)
+           + (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady))
+    return bool(det > 0)
+
+
+def _ccw(a, b, c) -> tuple:
+    return (a, b, c) if _orient2d_many(a, b, c)[0] > 0 else (a, c, b)
+
+
+def _integer_cases(rng):
+    """Small integer points: random quadruples, and quadruples on the circle of radius 5."""
+    g = np.random.default_rng(501)
+    cases = []
+    while len(cases) < 8:
+        a, b, c, d = (tuple(int(v) for v in g.integers(-6, 7, 2)) for _ in range(4))
+        if _orient2d_many(a, b, c)[0] != 0 and d not in (a, b, c):
+            cases.append((*_ccw(a, b, c), d))
+    ring = _integer_circle(5)
+    for i, j, k, m in [(0, 3, 6, 9), (1, 2, 7, 11), (4, 5, 10, 0)]:
+        cases.append((ring[i], ring[j], ring[k], ring[m]))
+    return cases
+
+
+def _shift(p, scale=0.125, origin=(2.0**20 + 0.5, -(2.0**19) + 0.25)):
+    return (origin[0] + scale * p[0], origin[1] + scale * p[1])
+
+
+def _cocircular_shifted(rng):
+    """Points exactly on one circle far from the origin (every coordinate exact in binary)."""
+    g = np.random.default_rng(65)
+    cases = []
+    for _ in range(6):
+        i, j, k, m = g.choice(len(CIRCLE_65), 4, replace=False)
+        a, b, c = (CIRCLE_65[v] for v in sorted((i, j, k)))  # sorted by angle: ccw
+        cases.append(tuple(_shift(p) for p in (a, b, c, CIRCLE_65[m])))
+    a, b, c = CIRCLE_65[2], CIRCLE_65[14], CIRCLE_65[27]
+    for d in [(0, 0), (10, -7), (60, 40), (-50, -45)]:  # two inside, two outside
+        cases.append(tuple(_shift(p) for p in (a, b, c, d)))
+    return cases
+
+
+def _nudged_circle_cases(g, count, fooled):
+    """Points of CIRCLE_65 / 8, with d moved 1-3 ulps: the float sign is wrong for each."""
+    cases = []
+    for _ in range(50000):
+        idx = np.sort(g.choice(len(CIRCLE_65), 4, replace=False))
+        k = int(g.integers(4))
+        a, b, c = (tuple(v / 8 for v in CIRCLE_65[i]) for i in np.delete(idx, k))
+        d = [v / 8 for v in CIRCLE_65[idx[k]]]
+        j, steps = int(g.integers(2)), int(g.choice([-3, -2, -1, 1, 2, 3]))
+        if d[j] == 0:
+            continue
+        d[j] += steps * float(np.spacing(d[j]))
+        d = tuple(d)
+        if fooled(a, b, c, d):
+            cases.append((a, b, c, d))
+            if len(cases) == count:
+                break
+    return cases
+
+
+def _near_cocircular_ulp(rng):
+    u = 2.0**-53
+    unit = [((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0 + u)),       # one ulp inside
+            ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0 - 2 * u))]   # one ulp outside
+    g = np.random.default_rng(4225)
+    return unit + _nudged_circle_cases(
+        g, 8, lambda a, b, c, d: _float_inside(a, b, c, d) != (incircle(a, b, c, d) > 0))
+
+
+def _unseen_near_cocircular(rng, count=8):
+    """Random circles; d a few ulps from the circle through a, b, c; float sign wrong."""
+    cases = []
+    for _ in range(40000):
+        centre = rng.uniform(-10, 10, 2)
+        radius = 10.0 ** rng.uniform(-1, 1.5)
+        angles = np.sort(rng.uniform(-np.pi, np.pi, 4))
+        ring = centre + radius * np.c_[np.cos(angles), np.sin(angles)]
+        k = int(rng.integers(4))
+        a, b, c = (tuple(float(v) for v in ring[i]) for i in range(4) if i != k)
+        if _orient2d_many(a, b, c)[0] <= 0:
+            continue
+        d = ring[k].copy()
+        j = int(rng.integers(2))
+        d[j] += int(rng.integers(-4, 5)) * np.spacing(d[j])
+        d = tuple(float(v) for v in d)
+        if _float_inside(a, b, c, d) != (incircle(a, b, c, d) > 0):
+            cases.append((a, b, c, d))
+            if len(cases) == count:
+                break
+    a, b, c = cases[0][:3] if cases else ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0))
+    middle = tuple((np.array(a) + np.array(b) + np.array(c)) / 3)
+    far = tuple(np.array(a) + 10 * (np.array(a) - np.array(middle)))
+    return cases + [(a, b, c, middle), (a, b, c, far)]
+
+
+@dataclass(frozen=True)
+class CircleCases:
+    build: Callable[[np.random.Generator], list]
+    weight: int
+    hint: str = ""
+
+
+CIRCLE_CASES = {
+    "integer-cases": CircleCases(_integer_cases, 1),
+    "cocircular-shifted": CircleCases(
+        _cocircular_shifted, 1,
+        "These points are exactly on one circle, far from the origin: subtract d before "
+        "squaring, and compute exactly."),
+    "near-cocircular-ulp": CircleCases(_near_cocircular_ulp, 2, EXACT_HINT),
+    "unseen-near-cocircular": CircleCases(_unseen_near_cocircular, 2, EXACT_HINT),
+}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(c.weight))
+                                  for n, c in CIRCLE_CASES.items()])
+def test_in_circle(student, credit, rng, name):
+    dataset = CIRCLE_CASES[name]
+    cases = []
+    for a, b, c, d in dataset.build(rng):
+        cases.append(((a, b, c, d), student.in_circle(a, b, c, d), incircle(a, b, c, d)))
+    fb.judge_in_circle(cases, hint=dataset.hint, credit=credit)
+
+
+# ---------------------------------------------------------------------------
+# point sets
+# ---------------------------------------------------------------------------
+
+def _random_box(rng, n):
+    """``n`` uniform points in a box of random place, size and shape."""
+    width = rng.uniform(1.0, 50.0)
+    size = np.array([width, width * rng.uniform(0.5, 2.0)])
+    return rng.uniform(-100.0, 100.0, 2) + size * rng.uniform(size=(n, 2))
+
+
+def _grid_6x6(rng):
+    xy = np.array([(x, y) for x in range(6) for y in range(6)], dtype=float)
+    return np.random.default_rng(66).permutation(xy) * 0.5 + [-1.0, 2.0]
+
+
+def _circle_20(rng):
+    """20 of the integer points of radius 65, scaled by 1/8 and moved: exactly cocircular."""
+    g = np.random.default_rng(20)
+    pts = np.array([CIRCLE_65[i] for i in g.choice(len(CIRCLE_65), 20, replace=False)], float)
+    return pts / 8 + [4096.5, -1024.25]
+
+
+def _sliver(rng):
+    """A lens 1 long and 2e-5 thick: thin triangles, and hull triangles whose
+    circumcircles are hundreds of times wider than the points."""
+    g = np.random.default_rng(5)
+    xt, xb = np.sort(g.uniform(0, 1, 20)), np.sort(g.uniform(0, 1, 20))
+    h = 1e-5
+    top = np.c_[xt, h * (1 - (2 * xt - 1) ** 2)]
+    bottom = np.c_[xb, -h * (1 - (2 * xb - 1) ** 2)]
+    return g.permutation(np.vstack([top, bottom, [[0.0, 0.0], [1.0, 0.0]]]))
+
+
+def _clustered(rng):
+    """Gaussian clusters of very different sizes and spreads."""
+    g = np.random.default_rng(31)
+    parts = [g.uniform(-10, 10, 2) + 10.0 ** g.uniform(-3, 0) * g.standard_normal(
+        (int(g.integers(20, 80)), 2)) for _ in range(5)]
+    return g.permutation(np.vstack(parts))
+
+
+def _lake_utm(rng):
+    """data/lake.csv in UTM-like coordinates, in another order."""
+    lake = np.loadtxt(LAKE_CSV, delimiter=",", skiprows=1)
+    return np.random.default_rng(8).permutation(lake) + UTM_ORIGIN
+
+
+@dataclass(frozen=True)
+class PointSet:
+    build: Callable[[np.random.Generator], np.ndarray]
+    weight: int
+    general: bool = True  # no four points cocircular: unique answer, scipy must agree
+
+
+DATASETS = {
+    "random-50": PointSet(lambda rng: _random_box(rng, 50), 2),
+    "random-500": PointSet(lambda rng: _random_box(rng, 500), 2),
+    "random-2000": PointSet(lambda rng: _random_box(rng, 2000), 2),
+    "grid-6x6": PointSet(_grid_6x6, 2, general=False),
+    "circle-20": PointSet(_circle_20, 2, general=False),
+    "sliver": PointSet(_sliver, 2),
+    "clustered": PointSet(_clustered, 2),
+    "lake-utm": PointSet(_lake_utm, 1),
+}
+
+
+# ---------------------------------------------------------------------------
+# the exact judge
+# ---------------------------------------------------------------------------
+
+def _sorted_set(tri) -> set[tuple[int, ...]]:
+    return {tuple(t) for t in np.sort(np.asarray(tri), axis=1).tolist()}
+
+
+def _interior_pairs(tri: np.ndarray):
+    """For each interior edge u -> v of triangle k (apex w), the apex z across it."""
+    edge_of = {}
+    for k, t in enumerate(tri.tolist()):
+        for i in range(3):
+            edge_of[t[i], t[(i + 1) % 3]] = (k, t[(i + 2) % 3])
+    rows = [(u, v, w, edge_of[v, u][1], k) for (u, v), (k, w) in edge_of.items()
+            if (v, u) in edge_of and u < v]
+    return np.array(rows, dtype=np.int64).reshape(-1, 5)
+
+
+def oracle(points: np.ndarray, *, general: bool) -> np.ndarray:
+    """The exact Delaunay triangulation; cross-checked with scipy when it is unique."""
+    expected = delaunay(points)
+    if general:
+        pairs = _interior_pairs(expected)
+        p = points
+        signs = _incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]])
+        if np.any(signs == 0) or _sorted_set(expected) != _sorted_set(Delaunay(points).simplices):
+            raise RuntimeError("reference.delaunay and scipy.spatial.Delaunay disagree, or the "
+                               "set has cocircular points: fix the dataset or its flag.")
+    return expected
+
+
+def _missing_near_hull(fixed: np.ndarray, expected: np.ndarray) -> bool | None:
+    """When the answer is part of the expected triangulation: True if every missing
+    triangle is joined to a hull edge through missing triangles (a super-triangle that
+    is too small), False if some are enclosed (a hole); None when it is not a part."""
+    got, want = _sorted_set(fixed), _sorted_set(expected)
+    missing = want - got
+    if not missing or not got <= want:
+        return None
+    hull = {frozenset(e) for e in fb.boundary_edges(expected)}
+    by_edge: dict[frozenset, list[tuple[int, ...]]] = {}
+    for t in missing:
+        for i in range(3):
+            by_edge.setdefault(frozenset((t[i], t[(i + 1) % 3])), []).append(t)
+    todo = [t for t in missing
+            if any(frozenset((t[i], t[(i + 1) % 3])) in hull for i in range(3))]
+    reached = set(todo)
+    while todo:
+        t = todo.pop()
+        for i in range(3):
+            for s in by_edge[frozenset((t[i], t[(i + 1) % 3]))]:
+                if s not in reached:
+                    reached.add(s)
+                    todo.append(s)
+    return reached == missing
+
+
+def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool):
+    """A judge (see the feedback module) using exact predicates only."""
+    n = len(points)
+    hull = len(fb.boundary_edges(expected))
+    count = len(expected)
+
+    def judge(tri: np.ndarray) -> tuple[float, list[str]]:
+        fb.check_indices(tri, n)
+        p = points
+        turn = _orient2d_many(p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]])
+        flat = np.flatnonzero(turn == 0)
+        if flat.size:
+            k = int(flat[0])
+            raise CheckFailure(f"Triangle {k} {fb.show_triangle(tri[k])} is flat: its three "
+                               "points lie on one line, so it has no circumcircle.")
+        clockwise = np.flatnonzero(turn < 0)
+        fixed = tri.copy()
+        fixed[clockwise] = fixed[clockwise][:, [0, 2, 1]]
+        _check_overlaps(tri, fixed)
+        _check_coverage(points, tri, fixed, expected, hull)
+        _check_empty_circles(points, tri, fixed)
+        if not is_delaunay(points, fixed) or (general and _sorted_set(fixed) != _sorted_set(expected)):
+            raise CheckFailure("Your triangles do not form the Delaunay triangulation of the "
+                               "points (they overlap or leave gaps).")
+        if clockwise.size:
+            return fb.FRACTIONS["clockwise"], [fb.clockwise_note(tri, clockwise.tolist())]
+        return 1.0, []
+
+    return judge
+
+
+def _check_overlaps(tri: np.ndarray, fixed: np.ndarray) -> None:
+    owner: dict[tuple[int, int], int] = {}
+    for k, t in enumerate(fixed.tolist()):
+        for i in range(3):
+            e = (t[i], t[(i + 1) % 3])
+            j = owner.setdefault(e, k)
+            if j != k:
+                raise CheckFailure(
+                    f"Triangles {j} {fb.show_triangle(tri[j])} and {k} {fb.show_triangle(tri[k])} "
+                    f"overlap: both lie on the same side of their common edge ({e[0]}, {e[1]}).")
+
+
+def _check_coverage(points, tri, fixed, expected, hull) -> None:
+    """Fail unless the triangles use every point and fill the convex hull."""
+    n, m, count = len(points), len(tri), len(expected)
+    unused = sorted(set(range(n)) - set(fixed.ravel().tolist()))
+    beyond = None
+    for u, v in fb.boundary_edges(fixed):
+        out = np.flatnonzero(_orient2d_many(points[u], points[v], points) < 0)
+        if out.size:
+            beyond = (u, v, int(out[0]))
+            break
+    if not unused and beyond is None and m == count:
+        return
+    parts = [fb.count_message(count, n, hull, m)] if m != count else []
+    near_hull = _missing_near_hull(fixed, expected)
+    if near_hull:
+        parts.append(f"the triangles along the hull are missing ({fb.SUPER_HINT})")
+    elif near_hull is False:
+        parts.append("your mesh has a hole: some triangles inside it are missing")
+    if beyond is not None:
+        u, v, q = beyond
+        parts.append(f"point {q} at {fb.show_point(points[q])} lies outside your mesh, "
+                     f"beyond its edge ({u}, {v})")
+    if unused:
+        q = unused[0]
+        parts.append(f"point {q} at {fb.show_point(points[q])} is a corner of no triangle"
+                     + (f" ({len(unused)} points are unused)" if len(unused) > 1 else ""))
+    if m > count and near_hull is None and beyond is None and not unused:
+        parts.append("some triangles overlap")
+    text = parts[0] + (": " + "; ".join(parts[1:]) if len(parts) > 1 else "")
+    raise CheckFailure(fb.sentence(text))
+
+
+def _check_empty_circles(points, tri, fixed) -> None:
+    """Fail at the first interior edge that is not locally Delaunay (exact)."""
+    pairs = _interior_pairs(fixed)
+    if len(pairs) == 0:
+        return
+    p = points
+    inside = _incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]]) > 0
+    if inside.any():
+        u, v, w, z, k = (int(x) for x in pairs[np.argmax(inside)])
+        raise CheckFailure(
+            f"Point {z} lies strictly inside the circumcircle of triangle {k} "
+            f"{fb.show_triangle(tri[k])}, so that triangle is not Delaunay (flip the edge "
+            f"({u}, {v}): the triangles on either side of it should be replaced).")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(d.weight))
+                                  for n, d in DATASETS.items()])
+def test_delaunay(student, credit, rng, name):
+    dataset = DATASETS[name]
+    points = dataset.build(rng)
+    expected = oracle(points, general=dataset.general)
+    got = student.delaunay(points)
+    judge = exact_judge(points, expected, general=dataset.general)
+    fb.grade_triangulation(got, len(points), judge, credit)
+
+
+# ---------------------------------------------------------------------------
+# plotting on the mesh
+# ---------------------------------------------------------------------------
+
+def _unseen_field(rng):
+    """Random points in a random box, and a smooth function with a random range."""
+    points = _random_box(rng, int(rng.integers(80, 200)))
+    z = (points - points.min(axis=0)) / np.ptp(points, axis=0)
+    k = rng.uniform(1.0, 3.0, 2)
+    wave = np.sin(k[0] * np.pi * z[:, 0]) * np.cos(k[1] * np.pi * z[:, 1])
+    return points, rng.uniform(-50, 50) + rng.uniform(1, 100) * wave
+
+
+def _far_values(rng):
+    """The lake with values in a narrow band far from 0 (a colour scale fixed to [0, 1] fails)."""
+    points = np.loadtxt(LAKE_CSV, delimiter=",", skiprows=1)
+    x, y = points[:, 0], points[:, 1]
+    return points, 1013.0 + 0.02 * np.hypot(x - 400.0, y - 320.0) / 300.0
+
+
+FIELDS = {"unseen-random": (_unseen_field, 2), "far-values": (_far_values, 1)}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(w))
+                                  for n, (_, w) in FIELDS.items()])
+def test_plot_on_mesh(student, credit, feedback, rng, name):
+    points, u = FIELDS[name][0](rng)
+    fb.grade_figure(student, points, delaunay(points), u, credit, feedback)

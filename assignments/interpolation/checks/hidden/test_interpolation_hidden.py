@@ -1,0 +1,415 @@
+"""Hidden checks for the interpolation assignment: the real grading.
+
+Nodes and weights are compared with ``reference.interpolation``; weights at
+any common scale (only ratios matter), including degrees where binomials and
+factorials overflow. ``lagrange_interp`` is called with weights at odd scales
+(the lecture's raw binomials, the reference times 3.7, a sign flip), several
+functions and node sets (equispaced, Chebyshev, random nodes in any order, an
+interval other than [-1, 1]), and judged against the reference, itself
+cross-checked with ``scipy.interpolate.barycentric_interpolate``. At the nodes
+the answer must be the data bit for bit; right next to a node it must be
+finite. ``plot_runge`` is judged by the data of its curves.
+
+Datasets named ``unseen-*`` draw their degree and points from the ``rng``
+fixture (a regrade draws the same, another submission draws others), with
+degrees that the notebook never mentions.
+
+Tolerance for values: Higham's forward bound for the second barycentric form,
+``|p_computed - p| <= (3n + 4) u Lambda_n max|f|`` with ``u = 2**-53`` and
+``Lambda_n`` the Lebesgue constant of the nodes; two correct programs may each
+be that far off, and the reference too, so the check allows ``SLACK`` times it
+(and never less than ``1e-14 max|f|``).
+
+References
+----------
+J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange interpolation",
+SIAM Review 46(3), 501-517, 2004. doi:10.1137/S0036144502417715
+N. J. Higham, "The numerical stability of barycentric Lagrange interpolation",
+IMA Journal of Numerical Analysis 24(4), 547-556, 2004. doi:10.1093/imanum/24.4.547
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+from scipy.interpolate import barycentric_interpolate as scipy_barycentric
+
+from autograder.compare import expect_array
+
+from reference.interpolation import (
+    barycentric_interpolate,
+    barycentric_weights,
+    chebyshev_nodes,
+    chebyshev_weights,
+    equispaced_nodes,
+    equispaced_weights,
+    lebesgue_constant,
+)
+
+
+def _load_feedback():
+    """The feedback module shared with the public checks (loaded by path, any import mode)."""
+    path = Path(__file__).resolve().parents[1] / "public" / "interp_feedback.py"
+    spec = importlib.util.spec_from_file_location("interp_checks_feedback", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+fb = _load_feedback()
+
+U = 2.0**-53
+SLACK = 10.0
+
+#: Degrees the notebook's narrative and public checks name: unseen degrees avoid them.
+#: Keep in sync with interpolation.ipynb.
+MENTIONED = frozenset({1, 2, 4, 7, 10, 12, 15, 20, 40, 67, 170, 171, 200, 1029, 1030,
+                       1075, 1100})
+
+
+def unseen_degree(rng: np.random.Generator, low: int, high: int, *, odd: bool = False) -> int:
+    """A degree in [low, high] that the notebook never mentions (odd only, if asked)."""
+    choices = [n for n in range(low, high + 1)
+               if n not in MENTIONED and (n % 2 == 1 or not odd)]
+    return int(rng.choice(choices))
+
+
+def runge(x):
+    return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
+
+
+def tolerance(x: np.ndarray, f: np.ndarray, weights: np.ndarray | None = None) -> float:
+    """SLACK times Higham's forward error bound for these nodes and data."""
+    lam = lebesgue_constant(x, weights)
+    top = float(np.max(np.abs(f)))
+    return max(SLACK * (3 * x.size + 1) * U * lam * top, 1e-14 * top)
+
+
+# ---------------------------------------------------------------------------
+# nodes
+# ---------------------------------------------------------------------------
+
+FIRST_KIND = ("these are Chebyshev points of the first kind (the roots of T_{n+1}), which "
+              "stop short of -1 and 1; the assignment asks for the second kind, "
+              "x_j = -cos(j pi / n), j = 0, ..., n.")
+
+NODE_FAMILIES = {
+    "equispaced": (equispaced_nodes, "equispaced nodes", lambda n: {}),
+    "chebyshev": (chebyshev_nodes, "Chebyshev nodes",
+                  lambda n: {FIRST_KIND: chebyshev_nodes(n, kind=1)}),
+}
+
+#: name -> degree (from the rng for unseen)
+NODE_DEGREES = {
+    "degree-1": lambda rng: 1,
+    "unseen": lambda rng: unseen_degree(rng, 5, 99),
+    "large-1000": lambda rng: 1000,
+}
+
+
+@pytest.mark.points(1)
+@pytest.mark.parametrize("degree", list(NODE_DEGREES))
+@pytest.mark.parametrize("family", list(NODE_FAMILIES))
+def test_nodes(student, credit, rng, family, degree):
+    make, what, known = NODE_FAMILIES[family]
+    n = NODE_DEGREES[degree](rng)
+    name = f"{family}_nodes"
+    got = getattr(student, name)(n)
+    fb.judge_nodes(got, make(n), call=f"{name}({n})", what=what, credit=credit,
+                   known=known(n))
+
+
+# ---------------------------------------------------------------------------
+# weights
+# ---------------------------------------------------------------------------
+
+NOT_HALVED = ("the end weights must be halved: w_j = (-1)^j for 0 < j < n, and "
+              "w_0 = 1/2, w_n = (-1)^n / 2.")
+CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equispaced nodes "
+                            "need w_j = (-1)^j C(n, j).")
+
+
+def _alternating(n: int) -> np.ndarray:
+    return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
+
+
+@dataclass(frozen=True)
+class WeightCase:
+    family: str
+    degree: Callable[[np.random.Generator], int]
+    weight: int
+
+
+WEIGHT_CASES = {
+    "equispaced-degree-1": WeightCase("equispaced", lambda rng: 1, 1),
+    "equispaced-unseen": WeightCase("equispaced", lambda rng: unseen_degree(rng, 5, 60), 1),
+    # 200! (about 7.9e374) overflows: factorial formulas give inf / inf = nan
+    "equispaced-factorials-overflow-200": WeightCase("equispaced", lambda rng: 200, 2),
+    # C(1100, 550) (about 3.3e329) overflows: raw binomials give inf or raise
+    "equispaced-binomials-overflow-1100": WeightCase("equispaced", lambda rng: 1100, 2),
+    # 2**1500 overflows and 2**-1500 underflows: scaling by 2**n fails both ways
+    "equispaced-underflow-1500": WeightCase("equispaced", lambda rng: 1500, 1),
+    "chebyshev-degree-1": WeightCase("chebyshev", lambda rng: 1, 1),
+    "chebyshev-unseen": WeightCase("chebyshev", lambda rng: unseen_degree(rng, 5, 500), 1),
+    "chebyshev-large-5000": WeightCase("chebyshev", lambda rng: 5000, 1),
+}
+
+WEIGHT_FAMILIES = {
+    "equispaced": (equispaced_weights, fb.EQUISPACED_HINT,
+                   lambda n: {CHEBYSHEV_FOR_EQUISPACED: _alternating(n)} if n > 2 else {}),
+    "chebyshev": (chebyshev_weights, fb.CHEBYSHEV_HINT,
+                  lambda n: {NOT_HALVED: _alternating(n)}),
+}
+
+
+@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.points(c.weight))
+                                  for k, c in WEIGHT_CASES.items()])
+def test_weights(student, rng, case):
+    spec = WEIGHT_CASES[case]
+    make, hint, known = WEIGHT_FAMILIES[spec.family]
+    n = spec.degree(rng)
+    name = f"{spec.family}_weights"
+    call = f"{name}({n})"
+    got = fb.call_weights(getattr(student, name), n, call=call, hint=hint)
+    fb.judge_weights(got, make(n), call=call, n=n, hint=hint, known=known(n))
+
+
+# ---------------------------------------------------------------------------
+# values of the interpolant
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Nodes, weights (at the scale the student receives them), data and points."""
+
+    x: np.ndarray
+    w: np.ndarray
+    f: np.ndarray
+    t: np.ndarray
+    about: str
+
+    def expected(self) -> np.ndarray:
+        value = barycentric_interpolate(self.x, self.f, self.t, self.w)
+        theirs = scipy_barycentric(self.x, self.f, self.t)
+        if np.max(np.abs(value - theirs)) > self.tol():
+            raise RuntimeError("reference.interpolation and scipy.interpolate disagree on "
+                               f"{self.about}: fix the oracle.")
+        return value
+
+    def tol(self) -> float:
+        return tolerance(self.x, self.f)
+
+
+def _lecture_runge(rng):
+    n = 15
+    x = equispaced_nodes(n)
+    w = np.array([(-1) ** j * math.comb(n, j) for j in range(n + 1)], dtype=float)
+    return Problem(x, w, runge(x), rng.uniform(-1, 1, 257),
+                   "Runge's function in 16 equispaced nodes, the lecture's weights (-1)^j C(15, j)")
+
+
+def _scaled_chebyshev(rng):
+    n = 25
+    x = chebyshev_nodes(n)
+    return Problem(x, 3.7 * chebyshev_weights(n), runge(x), rng.uniform(-1, 1, 400),
+                   "Runge's function in 26 Chebyshev points, weights 3.7 (-1)^j (halved at the ends)")
+
+
+def _large_chebyshev(rng):
+    n = 300
+    x = chebyshev_nodes(n)
+    return Problem(x, 1e-7 * chebyshev_weights(n), np.exp(x) * np.sin(5 * x),
+                   rng.uniform(-1, 1, 500), "exp(x) sin(5x) in 301 Chebyshev points")
+
+
+def _random_nodes(rng):
+    while True:
+        x = rng.uniform(-1, 1, 12)
+        if np.min(np.diff(np.sort(x))) > 0.03:
+            break
+    cubic = lambda s: 2 * s**3 - s + 0.5  # noqa: E731  (reproduced exactly: degree 3 <= 11)
+    t = rng.uniform(x.min(), x.max(), 300)
+    return Problem(x, -barycentric_weights(x), cubic(x), t,
+                   "a cubic in 12 random nodes, not sorted, weights with the opposite sign")
+
+
+def _unseen_abs(rng):
+    n = unseen_degree(rng, 41, 199)
+    x = chebyshev_nodes(n)
+    return Problem(x, chebyshev_weights(n), np.abs(x), rng.uniform(-1, 1, int(rng.integers(90, 400))),
+                   f"|x| in {n + 1} Chebyshev points")
+
+
+def _unseen_equispaced(rng):
+    n = unseen_degree(rng, 5, 19)
+    x = equispaced_nodes(n)
+    return Problem(x, equispaced_weights(n) * 2.0**-20, runge(x),
+                   rng.uniform(-1, 1, int(rng.integers(60, 300))),
+                   f"Runge's function in {n + 1} equispaced nodes")
+
+
+def _other_interval(rng):
+    n = 30
+    x = 5.0 + 5.0 * chebyshev_nodes(n)
+    return Problem(x, chebyshev_weights(n), np.sqrt(1.0 + x), rng.uniform(0, 10, 200),
+                   "sqrt(1 + x) in 31 Chebyshev points of [0, 10]")
+
+
+VALUE_CASES = {
+    "runge-equispaced-lecture-weights": _lecture_runge,
+    "runge-chebyshev-scaled-weights": _scaled_chebyshev,
+    "smooth-chebyshev-301-nodes": _large_chebyshev,
+    "cubic-random-unsorted-nodes": _random_nodes,
+    "unseen-abs-chebyshev": _unseen_abs,
+    "unseen-runge-equispaced": _unseen_equispaced,
+    "sqrt-chebyshev-on-0-10": _other_interval,
+}
+
+
+@pytest.mark.points(2)
+@pytest.mark.parametrize("case", list(VALUE_CASES))
+def test_interp(student, credit, rng, case):
+    p = VALUE_CASES[case](rng)
+    got = student.lagrange_interp(p.f, p.x, p.w, p.t)
+    fb.judge_values(got, p.expected(), t=p.t, nodes=p.x, tol=p.tol(), credit=credit,
+                    call=f"lagrange_interp ({p.about})")
+
+
+# ---------------------------------------------------------------------------
+# shapes: scalar in, scalar out; array in, array of the same shape out
+# ---------------------------------------------------------------------------
+
+SHAPES = {
+    "scalar": lambda rng: 0.3,
+    "one-point-array": lambda rng: np.array([0.3]),
+    "matrix": lambda rng: rng.uniform(-1, 1, (6, 7)),
+}
+
+
+@pytest.mark.points(1)
+@pytest.mark.parametrize("shape", list(SHAPES))
+def test_interp_shapes(student, credit, rng, shape):
+    n = 8
+    x, w = chebyshev_nodes(n), chebyshev_weights(n)
+    t = SHAPES[shape](rng)
+    got = student.lagrange_interp(runge(x), x, w, t)
+    call = f"lagrange_interp(f, x, w, t) with t of shape {np.shape(t)}"
+    if np.ndim(t) == 0:
+        got = fb.judge_scalar(got, call=call, credit=credit)
+    fb.judge_values(got, barycentric_interpolate(x, runge(x), t, w), t=np.asarray(t),
+                    nodes=x, tol=tolerance(x, runge(x)), credit=credit, call=call)
+
+
+# ---------------------------------------------------------------------------
+# at and next to the nodes
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.points(2)
+def test_exact_at_all_nodes(student, rng):
+    n = unseen_degree(rng, 5, 60)
+    x = equispaced_nodes(n)
+    f = runge(x)
+    order = rng.permutation(n + 1)
+    got = student.lagrange_interp(f, x, 1000.0 * equispaced_weights(n), x[order])
+    fb.judge_exact(got, f, x, order, call=f"lagrange_interp(f, x, w, t=x) with {n + 1} "
+                                          "equispaced nodes (shuffled)")
+
+
+@pytest.mark.points(1)
+def test_exact_at_each_node_scalar(student, rng):
+    n = 300
+    x, w = chebyshev_nodes(n), chebyshev_weights(n)
+    f = np.exp(x) * np.cos(3 * x)
+    for j in [0, n, *rng.choice(np.arange(1, n), 6, replace=False)]:
+        got = student.lagrange_interp(f, x, w, float(x[j]))
+        fb.judge_exact(got, f, x, np.array(j), call=f"lagrange_interp(f, x, w, t=x[{j}])")
+
+
+@pytest.mark.points(1)
+def test_nodes_among_points(student, credit, rng):
+    n = unseen_degree(rng, 21, 60)
+    x, w = chebyshev_nodes(n), chebyshev_weights(n)
+    f = np.tanh(3 * x)
+    picked = rng.choice(n + 1, 5, replace=False)
+    t = rng.uniform(-1, 1, 40)
+    spots = rng.choice(40, 5, replace=False)
+    t[spots] = x[picked]
+    got = student.lagrange_interp(f, x, w, t)
+    call = f"lagrange_interp(f, x, w, t) with {n + 1} Chebyshev points, some t on nodes"
+    arr = expect_array(got, shape=t.shape, dtype_kind="iuf", name=call)
+    fb.judge_exact(arr[spots], f, x, picked, call=call)
+    fb.judge_values(arr, barycentric_interpolate(x, f, t, w), t=t, nodes=x,
+                    tol=tolerance(x, f), credit=credit, call=call)
+
+
+def _next_to_nodes(rng):
+    n = unseen_degree(rng, 21, 80, odd=True)  # odd: no node at 0 (that case is below)
+    x = chebyshev_nodes(n)
+    inner = x[1:-1]
+    t = np.concatenate([np.nextafter(inner, np.inf), np.nextafter(inner, -np.inf),
+                        [np.nextafter(-1.0, 0.0), np.nextafter(1.0, 0.0)]])
+    return x, chebyshev_weights(n), np.cos(2 * x) + x, t, f"{n + 1} Chebyshev points"
+
+
+def _next_to_zero(rng):
+    n = 16
+    x = equispaced_nodes(n)  # node 8 is exactly 0
+    t = np.array([5e-324, -5e-324, 2.5e-320, 1e-310, -3e-308])
+    return x, equispaced_weights(n), runge(x), t, "17 equispaced nodes, t next to the node 0"
+
+
+NEAR = {"next-to-nodes": (_next_to_nodes, 2), "next-to-zero-subnormal": (_next_to_zero, 1)}
+
+
+@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.points(v[1]))
+                                  for k, v in NEAR.items()])
+def test_near_nodes(student, credit, rng, case):
+    x, w, f, t, about = NEAR[case][0](rng)
+    got = student.lagrange_interp(f, x, w, t)
+    fb.judge_values(got, barycentric_interpolate(x, f, t, w), t=t, nodes=x,
+                    tol=tolerance(x, f), credit=credit,
+                    call=f"lagrange_interp ({about}, one double away from a node)")
+
+
+# ---------------------------------------------------------------------------
+# the Runge plot
+# ---------------------------------------------------------------------------
+
+
+def _interpolant(family: str, m: int) -> Callable[[np.ndarray], np.ndarray]:
+    nodes, weights = {"equispaced": (equispaced_nodes, equispaced_weights),
+                      "Chebyshev": (chebyshev_nodes, chebyshev_weights)}[family]
+    x, w = nodes(m), weights(m)
+    return lambda s: barycentric_interpolate(x, runge(x), s, w)
+
+
+PLOTS = {"degree-12": (lambda rng: 12, 3),
+         "unseen": (lambda rng: unseen_degree(rng, 6, 18), 2)}
+
+
+@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.points(v[1]))
+                                  for k, v in PLOTS.items()])
+def test_plot_runge(student, credit, feedback, rng, case):
+    n = PLOTS[case][0](rng)
+    call = f"plot_runge({n})"
+    value, drawn = student.call("plot_runge", n, figures=True)
+    figure, note = fb.pick_figure(value, drawn, call=call)
+    png = fb.png_bytes(figure)
+    if png:
+        feedback.image("your plot", png)
+    wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
+              fb.Curve("the equispaced interpolant", _interpolant("equispaced", n)),
+              fb.Curve("the Chebyshev interpolant", _interpolant("Chebyshev", n))]
+    nearby = [fb.Curve(f"the {family} interpolant of degree {m} ({m + 1} nodes), but {call} "
+                       f"asks for degree {n} ({n + 1} nodes)", _interpolant(family, m))
+              for m in (n - 1, n + 1) for family in ("equispaced", "Chebyshev")]
+    fb.judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit,
+                        note=note)

@@ -1,0 +1,456 @@
+"""Staged feedback on nodes, weights, interpolants and the Runge plot.
+
+Shared by the public and the hidden checks. Every ``judge_*`` function takes
+what the student returned and what was expected (computed by the caller), and
+either returns (right), ends the check with ``credit.partial`` (right maths,
+broken convention), or raises ``CheckFailure`` with a message that says what
+is wrong, where, and how to fix it. Order of the stages: type, shape, finite
+values, known conventions, values, and where the first bad value is.
+
+Nothing here computes an interpolant: the caller passes the expected values,
+so this module gives away no solution.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Mapping, NamedTuple, Sequence
+
+import numpy as np
+
+from autograder.compare import CheckFailure, describe, expect_array
+from autograder.errors import StudentException
+
+# ---------------------------------------------------------------------------
+# tolerances, each with its reason
+# ---------------------------------------------------------------------------
+
+#: Nodes. Every correct formula (``np.linspace``, ``-1 + 2 j / n``,
+#: ``2 (j / n - 1/2)``, ``-cos(j pi / n)``, ``sin((2 j - n) pi / (2 n))``)
+#: lands within a few ulps of the reference: at most about 4e-16 apart on
+#: [-1, 1]. Any wrong formula is off by far more: the closest two Chebyshev
+#: nodes of degree 1000 are still 4.9e-6 apart.
+NODE_ATOL = 1e-14
+
+#: Weights, relative to the largest one. Exact integers give correctly rounded
+#: ratios (error 1e-16); the log-gamma route loses more: ``lgamma(1101)`` is
+#: about 6.6e3, so its rounding error (about 1e-12) becomes a relative error
+#: of that size after ``exp``. 1e-9 accepts both; a wrong formula is off by O(1).
+WEIGHT_RTOL = 1e-9
+#: Ratios below the normal range of doubles (2.2e-308) cannot be stored
+#: accurately: any value under this bound, 0 included, is accepted there.
+WEIGHT_ATOL = 1e-300
+
+#: Curves in a plot: largest error relative to max(1, max |curve|). Any
+#: double-precision evaluation is within 1e-12; a wrong degree or node family
+#: is off by more than 1e-2.
+CURVE_RTOL = 1e-6
+#: A drawn line counts as a curve from this many finite points on: node
+#: markers (n + 1 points) are not curves.
+MIN_CURVE_POINTS = 50
+#: A curve must reach this close to both ends of [-1, 1].
+CURVE_REACH = 0.95
+
+#: Share of a check's points kept when the maths is right but a convention is not.
+FRACTIONS = {
+    "descending": 0.5,       # the right nodes, listed from +1 down to -1
+    "first-form": 0.5,       # the first barycentric form: values scaled by the weights' scale
+    "array-for-scalar": 0.5,  # an array of one value for a scalar t
+    "no-return": 0.5,         # plot_runge drew a figure but did not return it
+}
+
+
+#: How to keep equispaced weights finite (shown when they overflow or underflow).
+EQUISPACED_HINT = (
+    "The binomials C(n, j) grow like 2^n: C(1100, 550) is about 3.3e329, beyond the largest "
+    "double (1.8e308), and factorials overflow much sooner (171! > 1.8e308). Only the ratios "
+    "of the weights matter: divide every C(n, j) by the largest, C(n, n // 2), before "
+    "converting to float (Python's exact integers divide correctly rounded), or work with "
+    "logarithms (math.lgamma) and subtract the largest before exp.")
+#: The same for Chebyshev weights, which never need large numbers.
+CHEBYSHEV_HINT = ("Chebyshev weights need no large numbers: w_j = (-1)^j, halved for j = 0 "
+                  "and j = n.")
+
+
+def show(value: Any) -> str:
+    """A number written so that pasting it back gives the same double."""
+    value = float(value)
+    return repr(int(value)) if value.is_integer() and abs(value) < 2.0**53 else repr(value)
+
+
+def _sentence(parts: Sequence[str]) -> str:
+    return " ".join(p[:1].upper() + p[1:] + ("" if p.endswith(".") else ".") for p in parts)
+
+
+# ---------------------------------------------------------------------------
+# calling the student
+# ---------------------------------------------------------------------------
+
+
+def call_weights(fn: Callable[[int], Any], n: int, *, call: str, hint: str) -> Any:
+    """``fn(n)``, turning an ``OverflowError`` raised inside it into a readable failure."""
+    try:
+        return fn(n)
+    except StudentException as exc:
+        if "OverflowError" not in str(exc):
+            raise
+        error = str(exc.args[0]).split(" raised ", 1)[-1]
+        raise CheckFailure(f"{call} raised {error}. Your weights overflow for n = {n}. "
+                           f"{hint}") from None
+
+
+# ---------------------------------------------------------------------------
+# nodes
+# ---------------------------------------------------------------------------
+
+
+def _close(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
+    return a.shape == b.shape and bool(np.all(np.abs(a - b) <= atol))
+
+
+def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit: Any,
+                known: Mapping[str, np.ndarray] | None = None) -> None:
+    """Nodes: n + 1 of them, finite, ascending, equal to ``expected`` within ``NODE_ATOL``.
+
+    ``what`` names the family ("equispaced nodes", "Chebyshev nodes"). ``known``
+    maps a message to a known wrong answer (e.g. points of the first kind).
+    """
+    expected = np.asarray(expected, dtype=float)
+    m = expected.size
+    arr = expect_array(got, dtype_kind="iuf", name=call)
+    if arr.ndim != 1:
+        raise CheckFailure(f"{call} should be a 1-D array of n + 1 = {m} nodes; got "
+                           f"{describe(got)}.")
+    if arr.size != m:
+        hint = (" Did you stop at j = n - 1? j runs over 0, 1, ..., n." if arr.size == m - 1
+                else "")
+        raise CheckFailure(f"{call} returned {arr.size} nodes; degree n = {m - 1} needs "
+                           f"n + 1 = {m} nodes.{hint}")
+    arr = arr.astype(float)
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise CheckFailure(f"{call}: node {bad[0]} is {arr[bad[0]]}; every node must be a "
+                           "finite number in [-1, 1].")
+    if _close(arr, expected, NODE_ATOL):
+        return
+    if m > 1 and _close(arr, expected[::-1], NODE_ATOL):
+        fix = " (x_j = -cos(j pi / n) rises from -1 to 1; cos(j pi / n) falls)" \
+            if "Chebyshev" in what else ""
+        credit.partial(FRACTIONS["descending"],
+                       f"{call}: your {what} are in descending order; the assignment asks "
+                       f"for ascending{fix}.")
+    for message, wrong in (known or {}).items():
+        if _close(arr, np.asarray(wrong, dtype=float), NODE_ATOL):
+            raise CheckFailure(f"{call}: {message}")
+    raise CheckFailure(_nodes_mismatch(arr, expected, call=call))
+
+
+def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
+    parts = []
+    if arr[0] != -1.0 or arr[-1] != 1.0:
+        parts.append(f"the nodes should run from -1 to 1; yours run from {show(arr[0])} to "
+                     f"{show(arr[-1])}")
+    steps = np.flatnonzero(np.diff(arr) <= 0)
+    if steps.size:
+        j = int(steps[0])
+        parts.append(f"the nodes must be ascending, but node {j + 1} ({show(arr[j + 1])}) "
+                     f"is not larger than node {j} ({show(arr[j])})")
+    err = np.abs(arr - expected)
+    j = int(np.argmax(err))
+    parts.append(f"node {j} is {show(arr[j])}, expected {show(expected[j])} (error "
+                 f"{err[j]:.2e}, allowed {NODE_ATOL:.0e}); {int((err > NODE_ATOL).sum())} of "
+                 f"{arr.size} nodes are off")
+    return f"{call}: " + "; ".join(parts) + "."
+
+
+# ---------------------------------------------------------------------------
+# weights
+# ---------------------------------------------------------------------------
+
+
+def judge_weights(got: Any, expected: np.ndarray, *, call: str, n: int, hint: str = "",
+                  known: Mapping[str, np.ndarray] | None = None) -> None:
+    """Weights at any common scale: ``got / got[k]`` against ``expected / expected[k]``.
+
+    ``k`` is the index of the largest expected weight (it never underflows).
+    ``hint`` explains how to avoid overflow for this family; ``known`` maps a
+    message to a known wrong answer (compared at any scale).
+    """
+    expected = np.asarray(expected, dtype=float)
+    m = expected.size
+    arr = expect_array(got, dtype_kind="iuf", name=call)
+    if arr.ndim != 1 or arr.size != m:
+        raise CheckFailure(f"{call} should be a 1-D array of n + 1 = {m} weights, one per "
+                           f"node; got {describe(got)}.")
+    arr = arr.astype(float)
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        j = int(bad[0])
+        raise CheckFailure(f"{call}: weight {j} is {arr[j]}: your weights overflow for "
+                           f"n = {n} ({bad.size} of {m} weights are not finite). {hint}")
+    k = int(np.argmax(np.abs(expected)))
+    if arr[k] == 0:
+        every = "every weight is 0" if not arr.any() else f"weight {k} is 0"
+        raise CheckFailure(f"{call}: your weights for n = {n} underflow to zero: {every}, "
+                           f"but weight {k} is the largest in exact arithmetic. Scale the "
+                           f"weights so that the largest is about 1. {hint}")
+    ratio, want = arr / arr[k], expected / expected[k]
+    err = np.abs(ratio - want)
+    over = err > WEIGHT_RTOL * np.abs(want) + WEIGHT_ATOL
+    if not over.any():
+        return
+    for message, wrong in (known or {}).items():
+        wrong = np.asarray(wrong, dtype=float)
+        if np.allclose(ratio, wrong / wrong[k], rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL):
+            raise CheckFailure(f"{call}: {message}")
+    flipped = np.flatnonzero((ratio != 0) & (np.abs(want) > WEIGHT_ATOL)
+                             & (np.sign(ratio) != np.sign(want)))
+    if flipped.size:
+        j = int(flipped[0])
+        raise CheckFailure(f"{call}: weight {j} has the wrong sign: the weights alternate in "
+                           f"sign, w_j = (-1)^j |w_j| (a common factor, even -1, is fine); "
+                           f"{flipped.size} of {m} weights have the wrong sign.")
+    j = int(np.flatnonzero(over)[0])
+    zero = (f" It is 0: it underflowed although its true size, {want[j]:.3g} times the "
+            f"largest, is a normal double." if ratio[j] == 0 else "")
+    raise CheckFailure(
+        f"{call}: weight {j} divided by weight {k} (the largest) should be "
+        f"{want[j]:.12g}; yours is {ratio[j]:.12g}. Only ratios matter (any common scale "
+        f"is fine); {int(over.sum())} of {m} ratios are off.{zero}")
+
+
+# ---------------------------------------------------------------------------
+# interpolant values
+# ---------------------------------------------------------------------------
+
+
+def _where(t: float, nodes: np.ndarray) -> str:
+    """Where ``t`` lies relative to the nodes: on one, next to one, or between."""
+    j = int(np.argmin(np.abs(nodes - t)))
+    if t == nodes[j]:
+        return f"t = {show(t)}, which is node x_{j}"
+    gap = abs(t - nodes[j])
+    if gap <= 4 * np.spacing(max(abs(nodes[j]), abs(t))) or gap < 1e-300:
+        return f"t = {show(t)}, right next to node x_{j} = {show(nodes[j])}"
+    return f"t = {show(t)}"
+
+
+def scale_factor(got: np.ndarray, expected: np.ndarray, off_node: np.ndarray,
+                 rtol: float = 1e-6) -> float | None:
+    """``c`` if ``got == c * expected`` wherever ``off_node`` (``c != 1``), else None.
+
+    Points on a node are left out: there a first-form program that tests for
+    nodes returns the data itself, unscaled.
+    """
+    got, expected = got[off_node], expected[off_node]
+    big = np.abs(expected) > 1e-3 * np.max(np.abs(expected), initial=0.0)
+    if big.sum() < 2 or not np.all(np.isfinite(got)):
+        return None
+    ratios = got[big] / expected[big]
+    c = float(np.median(ratios))
+    if c == 0 or abs(c - 1) < 1e-6:
+        return None
+    if np.allclose(got, c * expected, rtol=rtol, atol=rtol * abs(c) * np.max(np.abs(expected))):
+        return c
+    return None
+
+
+def judge_values(got: Any, expected: np.ndarray, *, t: np.ndarray, nodes: np.ndarray,
+                 tol: float, call: str, credit: Any) -> None:
+    """Values of the interpolant at ``t``: same shape, no NaN, within ``tol`` (absolute)."""
+    expected = np.asarray(expected, dtype=float)
+    t = np.asarray(t, dtype=float)
+    scalar = isinstance(got, (int, float, np.number)) or (isinstance(got, np.ndarray)
+                                                          and got.ndim == 0)
+    if expected.ndim and scalar:
+        raise CheckFailure(f"{call} returned one number for an array t of shape {t.shape}; "
+                           "it should return one value per entry of t, in an array of the same "
+                           "shape (loop over t, or better, compute with whole arrays).")
+    arr = expect_array(got, dtype_kind="iuf", name=call)
+    if arr.shape != expected.shape:
+        raise CheckFailure(f"{call}: t has shape {t.shape}, so the result should too; got "
+                           f"shape {arr.shape}.")
+    arr = arr.astype(float)
+    flat, want, tt = arr.ravel(), expected.ravel(), t.ravel()
+    bad = np.flatnonzero(~np.isfinite(flat))
+    if bad.size:
+        i = int(bad[0])
+        raise CheckFailure(f"{call} returned {flat[i]} at {_where(tt[i], nodes)} (entry {i}); "
+                           f"expected {want[i]:.15g}. {bad.size} of {flat.size} values are not "
+                           "finite." + _nan_hint(tt[i], nodes))
+    err = np.abs(flat - want)
+    if np.all(err <= tol):
+        return
+    c = scale_factor(flat, want, ~np.isin(tt, nodes))
+    if c is not None:
+        credit.partial(FRACTIONS["first-form"],
+                       f"{call}: every value is {c:.6g} times the interpolant. That is what the "
+                       "first barycentric form l(t) sum_j w_j f_j / (t - x_j) gives when the "
+                       "weights come at another scale. The weights may have any common scale: "
+                       "divide by sum_j w_j / (t - x_j) (the second form), and the scale "
+                       "cancels.")
+    i = int(np.argmax(err))
+    raise CheckFailure(f"{call} is off at {_where(tt[i], nodes)} (entry {i}): expected "
+                       f"{want[i]:.15g}, got {flat[i]:.15g} (error {err[i]:.2e}, allowed "
+                       f"{tol:.2e}); {int((err > tol).sum())} of {flat.size} values are outside "
+                       "the tolerance.")
+
+
+def _nan_hint(t: float, nodes: np.ndarray) -> str:
+    j = int(np.argmin(np.abs(nodes - t)))
+    if t == nodes[j]:
+        return (f" At a node, w_j / (t - x_j) is w_j / 0: return fvals[{j}] when "
+                f"t == xnodes[{j}] (exactly, no tolerance).")
+    return (f" t is {abs(t - nodes[j]):.3g} from node x_{j}: w_{j} / (t - x_{j}) can overflow to "
+            "inf there, and inf / inf is nan. Multiply every term by the distance to the "
+            "nearest node (it cancels in the quotient) so that no term overflows.")
+
+
+def judge_exact(got: Any, fvals: np.ndarray, nodes: np.ndarray, index: np.ndarray, *,
+                call: str) -> None:
+    """At ``t = nodes[index]`` the answer must be ``fvals[index]``, bit for bit."""
+    index = np.asarray(index)
+    arr = expect_array(got, dtype_kind="iuf", name=call)
+    if arr.shape != index.shape:
+        raise CheckFailure(f"{call}: t has shape {index.shape}, so the result should too; "
+                           f"got shape {arr.shape}.")
+    arr = arr.astype(float).ravel()
+    for i, j in enumerate(index.ravel()):
+        j = int(j)
+        if not arr[i] == fvals[j]:  # also catches nan
+            raise CheckFailure(
+                f"lagrange_interp returned {show(arr[i])} at node x_{j} = {show(nodes[j])}; "
+                f"it must return fvals[{j}] = {show(fvals[j])} exactly. Compare t == xnodes[j] "
+                "exactly (not with a tolerance) and return fvals[j] there.")
+
+
+def judge_scalar(got: Any, *, call: str, credit: Any) -> float:
+    """A scalar ``t`` gives a scalar: a float, or a 0-d array. Returns the value."""
+    if isinstance(got, bool) or got is None or isinstance(got, (str, dict)):
+        raise CheckFailure(f"{call} should return a number for a scalar t; got {describe(got)}.")
+    arr = expect_array(got, dtype_kind="iuf", name=call)
+    if arr.ndim == 0:
+        return float(arr)
+    if arr.size == 1:
+        credit.partial(FRACTIONS["array-for-scalar"],
+                       f"{call} returned {describe(got)} for a scalar t; return a scalar "
+                       "(a float) when t is a scalar, e.g. with float(...) or result[()] "
+                       "on a 0-d array.")
+    raise CheckFailure(f"{call} should return one number for a scalar t; got {describe(got)}.")
+
+
+# ---------------------------------------------------------------------------
+# the Runge plot
+# ---------------------------------------------------------------------------
+
+
+class Curve(NamedTuple):
+    """A reference curve to look for in a plot: its name and a function of x."""
+
+    name: str
+    fn: Callable[[np.ndarray], np.ndarray]
+
+
+def pick_figure(value: Any, drawn: list[Any], *, call: str) -> tuple[dict, str]:
+    """The figure data to grade, and a note if it was not returned."""
+    if isinstance(value, dict) and isinstance(value.get("axes"), list):
+        return value, ""
+    figures = [f for f in drawn if isinstance(f, dict) and isinstance(f.get("axes"), list)]
+    if figures:
+        return figures[-1], (f"{call} returned {describe(value)}, not the Figure; it drew one, "
+                             "so I graded that, but end plot_runge with `return fig`.")
+    raise CheckFailure(f"{call} should return a matplotlib Figure (fig, ax = plt.subplots(); "
+                       f"...; return fig); got {describe(value)} and no figure was drawn.")
+
+
+def png_bytes(figure: Mapping[str, Any]) -> bytes | None:
+    png = figure.get("png")
+    if isinstance(png, np.ndarray):
+        return png.astype(np.uint8).tobytes()
+    return bytes(png) if isinstance(png, (bytes, bytearray)) else None
+
+
+def drawn_curves(figure: Mapping[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(x, y) of every line or point set with at least ``MIN_CURVE_POINTS`` finite points."""
+    pieces = []
+    for axes in figure.get("axes", []) or []:
+        for line in axes.get("lines", []) or []:
+            pieces.append((line.get("x", []), line.get("y", [])))
+        for coll in axes.get("collections", []) or []:
+            for xy in [coll.get("offsets")] + list(coll.get("segments", []) or []):
+                xy = np.asarray(xy if xy is not None else [], dtype=float)
+                if xy.ndim == 2 and xy.shape[1] == 2:
+                    pieces.append((xy[:, 0], xy[:, 1]))
+    curves = []
+    for x, y in pieces:
+        try:
+            x, y = np.ravel(np.asarray(x, dtype=float)), np.ravel(np.asarray(y, dtype=float))
+        except (TypeError, ValueError):
+            continue
+        k = min(x.size, y.size)
+        ok = np.isfinite(x[:k]) & np.isfinite(y[:k])
+        if ok.sum() >= MIN_CURVE_POINTS:
+            curves.append((x[:k][ok], y[:k][ok]))
+    return curves
+
+
+def curve_error(curve: tuple[np.ndarray, np.ndarray], fn: Callable) -> tuple[float, float]:
+    """Largest error of a drawn curve against ``fn``, relative to max(1, max |fn|); and where."""
+    x, y = curve
+    want = np.asarray(fn(x), dtype=float)
+    err = np.abs(y - want) / max(1.0, float(np.max(np.abs(want))))
+    err[~np.isfinite(err)] = np.inf
+    i = int(np.argmax(err))
+    return float(err[i]), float(x[i])
+
+
+def _count(k: int) -> str:
+    return f"your {k} curve" + ("" if k == 1 else "s")
+
+
+def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[Curve],
+                     nearby: Sequence[Curve] = (), credit: Any, note: str = "") -> None:
+    """Find each wanted curve among the drawn ones (by values, not labels or colours).
+
+    Each wanted curve is worth an equal share; one that does not reach both
+    ends of [-1, 1] gets half its share. ``nearby`` are curves that a common
+    mistake draws instead (other degrees); they only sharpen the message.
+    """
+    curves = drawn_curves(figure)
+    share, score, parts, found = 1.0 / len(wanted), 0.0, [], []
+    for curve in wanted:
+        errors = [curve_error(c, curve.fn) for c in curves]
+        best = int(np.argmin([e for e, _ in errors])) if errors else -1
+        if best >= 0 and errors[best][0] <= CURVE_RTOL:
+            x = curves[best][0]
+            found.append(curve.name)
+            if x.min() <= -CURVE_REACH and x.max() >= CURVE_REACH:
+                score += share
+            else:
+                score += share / 2
+                parts.append(f"{curve.name} in your plot covers only [{x.min():.3g}, "
+                             f"{x.max():.3g}]; draw it over the whole interval [-1, 1]")
+            continue
+        parts.append(_missing(curve, curves, errors, best, nearby))
+    if note:
+        score *= FRACTIONS["no-return"]
+        parts.append(note)
+    if score >= 1.0 - 1e-12:
+        return
+    if found and len(found) < len(wanted):
+        parts.insert(0, "I found " + " and ".join(found))
+    message = _sentence(parts)
+    if score <= 0.0:
+        raise CheckFailure(message)
+    credit.partial(score, message)
+
+
+def _missing(curve: Curve, curves: list, errors: list, best: int, nearby: Sequence[Curve]) -> str:
+    if not curves:
+        return (f"I could not find {curve.name}: your figure has no curve (a line through at "
+                f"least {MIN_CURVE_POINTS} points)")
+    text = f"I could not find {curve.name} among {_count(len(curves))}"
+    for other in nearby:
+        if curve_error(curves[best], other.fn)[0] <= CURVE_RTOL:
+            return text + f"; your closest curve is {other.name}"
+    err, x = errors[best]
+    return text + f" (the closest one is off by {err:.2g} at x = {x:.3g})"

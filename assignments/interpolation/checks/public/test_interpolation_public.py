@@ -1,0 +1,177 @@
+"""Public checks for the interpolation assignment: small cases you can verify by hand.
+
+Run them with ``autograder check interpolation.ipynb``. The graded checks use
+more functions, other node sets, larger degrees and sizes you have not seen,
+and look closely at what happens at and right next to the nodes.
+
+Expected interpolants here come from ``numpy.polynomial`` least squares with
+as many coefficients as nodes (an exact fit, accurate to about 1e-13 for these
+small degrees), so this file gives away no barycentric formula. In your own
+code ``numpy.polynomial`` is not allowed.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+
+def _load_feedback():
+    """The shared feedback module beside this file (works whatever pytest's import mode)."""
+    path = Path(__file__).with_name("interp_feedback.py")
+    spec = importlib.util.spec_from_file_location("interp_checks_feedback", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+fb = _load_feedback()
+
+
+def runge(x):
+    return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
+
+
+def cheb2(n):
+    """Chebyshev points of the second kind, ascending."""
+    return -np.cos(np.pi * np.arange(n + 1) / n)
+
+
+def cheb1(n):
+    """Chebyshev points of the first kind (a common mix-up), ascending."""
+    return -np.cos((2 * np.arange(n + 1) + 1) * np.pi / (2 * n + 2))
+
+
+def fitted(nodes, f=runge):
+    """The polynomial through (nodes, f(nodes)), by an exact least-squares fit."""
+    nodes = np.asarray(nodes, dtype=float)
+    return np.polynomial.Polynomial.fit(nodes, f(nodes), deg=nodes.size - 1)
+
+
+FIRST_KIND = ("these are Chebyshev points of the first kind (the roots of T_{n+1}), which "
+              "stop short of -1 and 1; the assignment asks for the second kind, "
+              "x_j = -cos(j pi / n), j = 0, ..., n.")
+
+#: name -> (function, n, expected nodes, known wrong answers)
+NODES = {
+    "equispaced-4": ("equispaced_nodes", 4, [-1.0, -0.5, 0.0, 0.5, 1.0], {}),
+    "chebyshev-4": ("chebyshev_nodes", 4, [-1.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5), 1.0],
+                    {FIRST_KIND: cheb1(4)}),
+    "chebyshev-7": ("chebyshev_nodes", 7, cheb2(7), {FIRST_KIND: cheb1(7)}),
+}
+
+NOT_HALVED = ("the end weights must be halved: w_j = (-1)^j for 0 < j < n, and "
+              "w_0 = 1/2, w_n = (-1)^n / 2.")
+CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equispaced nodes "
+                            "need w_j = (-1)^j C(n, j).")
+
+
+def _equispaced_ratios(n):
+    """(-1)^j C(n, j) / C(n, n // 2), each correctly rounded (exact integers divided)."""
+    top = math.comb(n, n // 2)
+    return np.array([(-1) ** j * (math.comb(n, j) / top) for j in range(n + 1)])
+
+
+def _alternating(n):
+    return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
+
+
+#: name -> (function, n, expected weights at any scale, overflow hint, known wrong answers)
+WEIGHTS = {
+    "equispaced-4": ("equispaced_weights", 4, [1.0, -4.0, 6.0, -4.0, 1.0], fb.EQUISPACED_HINT,
+                     {CHEBYSHEV_FOR_EQUISPACED: _alternating(4)}),
+    "chebyshev-4": ("chebyshev_weights", 4, [0.5, -1.0, 1.0, -1.0, 0.5], fb.CHEBYSHEV_HINT,
+                    {NOT_HALVED: _alternating(4)}),
+    "equispaced-1100": ("equispaced_weights", 1100, _equispaced_ratios(1100),
+                        fb.EQUISPACED_HINT, {}),
+}
+
+
+@pytest.mark.points(1)
+@pytest.mark.parametrize("case", list(NODES))
+def test_nodes_small(student, credit, case):
+    name, n, expected, known = NODES[case]
+    got = getattr(student, name)(n)
+    fb.judge_nodes(got, np.asarray(expected), call=f"{name}({n})",
+                   what=name.split("_")[0].replace("chebyshev", "Chebyshev") + " nodes",
+                   credit=credit, known=known)
+
+
+@pytest.mark.points(1)
+@pytest.mark.parametrize("case", list(WEIGHTS))
+def test_weights_small(student, case):
+    name, n, expected, hint, known = WEIGHTS[case]
+    call = f"{name}({n})"
+    got = fb.call_weights(getattr(student, name), n, call=call, hint=hint)
+    fb.judge_weights(got, np.asarray(expected), call=call, n=n, hint=hint, known=known)
+
+
+@pytest.mark.points(1)
+def test_interp_x_squared(student, credit):
+    """Three nodes reproduce x^2 exactly; weights 1/2, -1, 1/2."""
+    x, w = np.array([-1.0, 0.0, 1.0]), np.array([0.5, -1.0, 0.5])
+    t = np.array([-0.5, 0.25, 0.5, 0.9])
+    got = student.lagrange_interp(x**2, x, w, t)
+    fb.judge_values(got, t**2, t=t, nodes=x, tol=1e-14, credit=credit,
+                    call="lagrange_interp(x**2, [-1, 0, 1], [0.5, -1, 0.5], t)")
+
+
+@pytest.mark.points(1)
+def test_interp_runge_chebyshev_10(student, credit):
+    """Runge's function in 11 Chebyshev points, on a grid that includes the end nodes."""
+    x = cheb2(10)
+    w = np.where(np.arange(11) % 2 == 0, 1.0, -1.0)
+    w[[0, -1]] *= 0.5
+    t = np.linspace(-1.0, 1.0, 201)
+    got = student.lagrange_interp(runge(x), x, w, t)
+    # tolerance: the fit is accurate to about 1e-13, the barycentric formula to 1e-15
+    fb.judge_values(got, fitted(x)(t), t=t, nodes=x, tol=1e-11, credit=credit,
+                    call="lagrange_interp(f(x), x, w, t) with 11 Chebyshev points")
+
+
+@pytest.mark.points(1)
+def test_interp_scalar(student, credit):
+    x, w = np.array([-1.0, 0.0, 1.0]), np.array([0.5, -1.0, 0.5])
+    call = "lagrange_interp(x**2, [-1, 0, 1], [0.5, -1, 0.5], 0.3)"
+    value = fb.judge_scalar(student.lagrange_interp(x**2, x, w, 0.3), call=call, credit=credit)
+    fb.judge_values(value, np.float64(0.09), t=np.float64(0.3), nodes=x, tol=1e-15,
+                    credit=credit, call=call)
+
+
+@pytest.mark.points(1)
+def test_interp_exact_at_nodes(student):
+    """At the nodes the answer is the data itself, bit for bit (the lecture's weights)."""
+    x = np.linspace(-1.0, 1.0, 5)
+    f, w = runge(x), np.array([1.0, -4.0, 6.0, -4.0, 1.0])
+    got = student.lagrange_interp(f, x, w, x)
+    fb.judge_exact(got, f, x, np.arange(5), call="lagrange_interp(f, x, w, t=x)")
+    for j in (1, 3):
+        got = student.lagrange_interp(f, x, w, float(x[j]))
+        fb.judge_exact(got, f, x, np.array(j),
+                       call=f"lagrange_interp(f, x, w, t={x[j]})")
+
+
+@pytest.mark.points(2)
+def test_plot_runge_10(student, credit, feedback):
+    n = 10
+    call = f"plot_runge({n})"
+    value, drawn = student.call("plot_runge", n, figures=True)
+    figure, note = fb.pick_figure(value, drawn, call=call)
+    png = fb.png_bytes(figure)
+    if png:
+        feedback.image("your plot", png)
+    equispaced, chebyshev = np.linspace(-1.0, 1.0, n + 1), cheb2(n)
+    wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
+              fb.Curve("the equispaced interpolant", fitted(equispaced)),
+              fb.Curve("the Chebyshev interpolant", fitted(chebyshev))]
+    nearby = [fb.Curve(f"the {name} interpolant of degree {m} ({m + 1} nodes), but "
+                       f"{call} asks for degree {n} ({n + 1} nodes)", fitted(nodes(m)))
+              for m in (n - 1, n + 1)
+              for name, nodes in (("equispaced", lambda k: np.linspace(-1, 1, k + 1)),
+                                  ("Chebyshev", cheb2))]
+    fb.judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit,
+                        note=note)

@@ -1,0 +1,375 @@
+"""Hidden checks for the spline car: the real grading.
+
+``spline_coefficients`` is compared with ``reference.splines.CubicSpline``
+(natural end conditions; its ``c`` array read as rows [a, b, c, d]) on named
+point sets, after staged property checks that say what is wrong (passes
+through the points, C2 at the interior knots, S'' = 0 at the ends). A
+convergence test measures the order of accuracy on smooth functions.
+``spline_eval`` gets the reference coefficients, so its checks do not depend
+on the student's ``spline_coefficients``. ``draw_car`` draws unseen shapes, so
+a hard-coded picture fails. Sets named ``unseen-*`` come from the ``rng``
+fixture: a regrade draws the same inputs, another submission draws others.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from autograder.compare import CheckFailure, describe
+from reference.data import car
+from reference.splines import CubicSpline
+
+
+def _load_feedback():
+    """The feedback module shared with the public checks (loaded by path, any import mode)."""
+    path = Path(__file__).resolve().parents[1] / "public" / "spline_feedback.py"
+    spec = importlib.util.spec_from_file_location("spline_checks_feedback", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+judge = _load_feedback()
+
+
+def expected_rows(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Rows [a, b, c, d] of the natural spline: row i = [c[3,i], c[2,i], c[1,i], c[0,i]]."""
+    return CubicSpline(x, y, bc_type="natural").c[::-1].T.copy()
+
+
+def evaluate(rows: np.ndarray, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The piecewise cubic with rows [a, b, c, d] at ``t`` (end pieces extended)."""
+    i = np.clip(np.searchsorted(x, t, side="right") - 1, 0, len(rows) - 1)
+    u = t - x[i]
+    a, b, c, d = rows[i].T
+    return a + u * (b + u * (c + u * d))
+
+
+# ---------------------------------------------------------------------------
+# point sets
+# ---------------------------------------------------------------------------
+
+def _line_2pts(rng):
+    return np.array([-1.5, 2.5]), np.array([3.0, -1.0])
+
+
+def _parabola_5(rng):
+    x = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
+    return x, x**2 + 1.0
+
+
+def _random_12(rng):
+    g = np.random.default_rng(12)
+    return np.cumsum(g.uniform(0.2, 1.5, 12)), g.normal(0.0, 2.0, 12)
+
+
+def _uneven_spacing(rng):
+    """Gaps from 0.001 to 1 side by side: any formula that assumes equal gaps fails."""
+    g = np.random.default_rng(7)
+    x = np.concatenate([[0.0], np.cumsum(10.0 ** g.uniform(-3.0, 0.0, 15))])
+    return x, np.sin(3.0 * x) + 0.3 * g.normal(size=x.size)
+
+
+def _large_500(rng):
+    g = np.random.default_rng(500)
+    x = np.cumsum(g.uniform(0.05, 0.5, 500))
+    return x, np.sin(x) + 0.1 * g.normal(size=500)
+
+
+def _runge_15(rng):
+    x = np.linspace(-1.0, 1.0, 15)
+    return x, 1.0 / (1.0 + 25.0 * x**2)
+
+
+def _far_from_origin(rng):
+    """Knots near 1000: coefficients must be local, in powers of (t - x_i), not of t."""
+    g = np.random.default_rng(1000)
+    x = 1000.0 + np.cumsum(g.uniform(0.5, 1.5, 9))
+    return x, g.normal(size=9)
+
+
+def _unseen_random(rng):
+    n = int(rng.integers(6, 41))
+    x = rng.uniform(-10.0, 10.0) + np.cumsum(rng.uniform(0.1, 2.0, n))
+    return x, rng.normal(0.0, rng.uniform(0.5, 5.0), n)
+
+
+@dataclass(frozen=True)
+class PointSet:
+    build: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]
+    weight: int
+    rtol: float  # relative to |expected| + the largest |expected| in the column
+    reason: str
+
+
+WELL_SPACED = ("gaps of similar size: the system for M is strictly diagonally dominant "
+               "(condition number below 3), so correct methods agree to ~1e-14")
+
+DATASETS = {
+    "line-2pts": PointSet(_line_2pts, 1, 1e-9, "no system to solve: exact up to rounding"),
+    "parabola-5": PointSet(_parabola_5, 1, 1e-9, WELL_SPACED),
+    "random-12": PointSet(_random_12, 2, 1e-9, WELL_SPACED),
+    "uneven-spacing": PointSet(_uneven_spacing, 2, 1e-7,
+                               "gaps from 1e-3 to 1: d = (M_(i+1) - M_i) / (6 h_i) divides "
+                               "rounding errors by small h_i; correct methods agree to ~1e-12"),
+    "large-500": PointSet(_large_500, 2, 1e-8,
+                          "500 unknowns: rounding accumulates along the elimination, still "
+                          "well conditioned; correct methods agree to ~1e-13"),
+    "runge-15": PointSet(_runge_15, 1, 1e-9, WELL_SPACED),
+    "far-from-origin": PointSet(_far_from_origin, 1, 1e-8,
+                                "h_i = x_(i+1) - x_i loses 3 digits next to 1000"),
+    "unseen-random": PointSet(_unseen_random, 2, 1e-8, WELL_SPACED),
+}
+
+
+def _params(names, weight=None):
+    return [pytest.param(n, marks=pytest.mark.points(weight or DATASETS[n].weight))
+            for n in names]
+
+
+@pytest.mark.parametrize("name", _params(DATASETS))
+def test_spline_coefficients(student, credit, rng, name):
+    dataset = DATASETS[name]
+    x, y = dataset.build(rng)
+    got = student.spline_coefficients(x, y)
+    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=dataset.rtol)
+
+
+@pytest.mark.parametrize("name", _params(["random-12", "unseen-random"], weight=1))
+def test_natural_ends(student, credit, rng, name):
+    dataset = DATASETS[name]
+    x, y = dataset.build(rng)
+    reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
+    judge.check_natural_ends(reading, x, y, dataset.rtol)
+    judge.finish(reading, credit)
+
+
+@pytest.mark.parametrize("name", _params(["random-12", "uneven-spacing", "unseen-random"],
+                                         weight=1))
+def test_continuity(student, credit, rng, name):
+    dataset = DATASETS[name]
+    x, y = dataset.build(rng)
+    reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
+    judge.check_continuity(reading, x, y, dataset.rtol)
+    judge.finish(reading, credit)
+
+
+# ---------------------------------------------------------------------------
+# order of accuracy
+# ---------------------------------------------------------------------------
+
+#: name -> (f, a, b): smooth functions whose f'' is not zero at the ends
+FUNCTIONS = {"sin": (np.sin, 0.0, 3.0), "exp": (np.exp, -1.0, 1.0)}
+#: Intervals of the coarse grid; the fine grid has twice as many (its knots nest).
+COARSE = 32
+#: The error is measured on the middle half: near the ends a natural spline is only
+#: O(h^2) accurate (S'' = 0 there while f'' is not), in a layer that shrinks with h.
+INTERIOR = 0.25
+#: Interior order: 4 for a cubic spline (measured 3.97 to 4.01 with these grids);
+#: 2 for piecewise linear interpolation.
+INTERIOR_ORDER = 3.5
+#: Whole-interval order: 2 for natural ends (measured 2.00); 1 for zero slopes at the ends.
+WHOLE_ORDER = 1.5
+#: Largest interior error on the fine grid (a correct spline: below 4e-6 here).
+FINE_ERROR = 1e-4
+
+
+def _spline_of(student, f, a, b, intervals):
+    """The knots and the student's coefficients for f at ``intervals + 1`` equal steps."""
+    x = np.linspace(a, b, intervals + 1)
+    return x, judge.read_coefficients(student.spline_coefficients(x, f(x)), x, f(x))
+
+
+def _max_error(f, x, reading, margin):
+    t = np.linspace(x[0] + margin, x[-1] - margin, 20 * (len(x) - 1) + 1)
+    return float(np.max(np.abs(evaluate(reading.rows, x, t) - f(t))))
+
+
+def _order(coarse, fine):
+    if fine == 0.0:
+        return math.inf
+    return math.log2(coarse / fine) if coarse > 0 else -math.inf
+
+
+@pytest.mark.points(2)
+@pytest.mark.parametrize("name", list(FUNCTIONS))
+def test_convergence(student, credit, name):
+    f, a, b = FUNCTIONS[name]
+    margin = INTERIOR * (b - a)
+    x_coarse, coarse = _spline_of(student, f, a, b, COARSE)
+    x_fine, reading = _spline_of(student, f, a, b, 2 * COARSE)
+    e_coarse = _max_error(f, x_coarse, coarse, margin)
+    e_fine = _max_error(f, x_fine, reading, margin)
+    where = (f"on the middle half [{a + margin:g}, {b - margin:g}] of [{a:g}, {b:g}] (away from "
+             "the ends, where a natural spline is only O(h^2) accurate)")
+    order = _order(e_coarse, e_fine)
+    if not order >= INTERIOR_ORDER:
+        looks = ("like piecewise linear interpolation (order 2)" if order > 1.5 else
+                 "like order 1 or worse")
+        raise CheckFailure(
+            f"Interpolating f = {name} at {COARSE + 1} and then {2 * COARSE + 1} equally spaced "
+            f"points, your spline's maximum error {where} went from {e_coarse:.2e} to "
+            f"{e_fine:.2e}: halving the spacing h divided it by {e_coarse / e_fine:.1f}, order "
+            f"{order:.1f}, which looks {looks}. A cubic spline's error there shrinks like h^4: "
+            "the ratio should be about 16.")
+    if not e_fine <= FINE_ERROR:
+        raise CheckFailure(
+            f"Interpolating f = {name} at {2 * COARSE + 1} equally spaced points, your spline is "
+            f"off by up to {e_fine:.2e} {where}; a cubic spline is accurate to about 1e-6 there. "
+            "Check that S(t) uses the piece that contains t.")
+    whole_fine = _max_error(f, x_fine, reading, 0.0)
+    whole = _order(_max_error(f, x_coarse, coarse, 0.0), whole_fine)
+    if whole < WHOLE_ORDER:
+        credit.partial(0.5,
+                       f"Away from the ends your error shrinks like h^{order:.0f}, as it should, "
+                       f"but over the whole interval only like h^{whole:.1f} (error "
+                       f"{whole_fine:.1e} near the ends with {2 * COARSE} intervals): the end "
+                       "conditions are off. With natural ends (S'' = 0) the error near the ends "
+                       "is O(h^2); zero slopes at the ends give O(h).")
+    judge.finish(reading, credit)
+
+
+# ---------------------------------------------------------------------------
+# spline_eval, with the reference coefficients
+# ---------------------------------------------------------------------------
+
+def _knots(x, rng):
+    return x.copy()
+
+
+def _between(x, rng):
+    mid = 0.5 * (x[:-1] + x[1:])
+    inside = np.random.default_rng(3).uniform(x[0], x[-1], 40)
+    return np.concatenate([mid, inside])
+
+
+def _outside(x, rng):
+    span = x[-1] - x[0]
+    return np.array([x[0] - 0.3 * span, x[0] - 0.01, x[-1] + 0.01, x[-1] + 0.2 * span])
+
+
+def _unseen_unsorted(x, rng):
+    """Random points in random order, a few outside: t need not be sorted."""
+    span = x[-1] - x[0]
+    return rng.permutation(np.concatenate([rng.uniform(x[0], x[-1], 60),
+                                           rng.uniform(x[0] - 0.1 * span, x[0], 2),
+                                           rng.uniform(x[-1], x[-1] + 0.1 * span, 2)]))
+
+
+#: name -> (points t from the knots x, data set, weight)
+EVAL_SETS = {
+    "knots": (_knots, "random-12", 1),
+    "between": (_between, "uneven-spacing", 2),
+    "outside": (_outside, "random-12", 1),
+    "unseen-unsorted": (_unseen_unsorted, "unseen-random", 1),
+}
+#: One Horner evaluation per point: rounding only. Relative to |value| + max |value|.
+EVAL_RTOL = 1e-12
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(w))
+                                  for n, (_, _, w) in EVAL_SETS.items()])
+def test_spline_eval(student, credit, rng, name):
+    make_t, data, _ = EVAL_SETS[name]
+    x, y = DATASETS[data].build(rng)
+    rows = expected_rows(x, y)
+    t = make_t(x, rng)
+    got = student.spline_eval(x, rows, t)
+    judge.grade_eval(got, x, t, evaluate(rows, x, t), rtol=EVAL_RTOL, credit=credit,
+                     retry_reversed=lambda: student.spline_eval(x, rows[:, ::-1].copy(), t))
+
+
+@pytest.mark.points(1)
+def test_spline_eval_scalar(student, credit):
+    x, y = DATASETS["random-12"].build(None)
+    rows = expected_rows(x, y)
+    t = float(0.5 * (x[4] + x[5]))
+    got = student.spline_eval(x, rows, t)
+    value = got.item() if isinstance(got, np.ndarray) and got.ndim == 0 else got
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise CheckFailure(f"spline_eval(x, coeffs, t) with a single number t = {t:.4g} should "
+                           f"return a single number; got {describe(got)}.")
+    judge.grade_eval(np.array(float(value)), x, np.array(t), evaluate(rows, x, np.array(t)),
+                     rtol=EVAL_RTOL, credit=credit,
+                     retry_reversed=lambda: student.spline_eval(x, rows[:, ::-1].copy(), t))
+
+
+# ---------------------------------------------------------------------------
+# drawings of unseen shapes
+# ---------------------------------------------------------------------------
+
+def _thin_straights(points):
+    """Drop the points in the middle of straight runs (collinear with both neighbours)."""
+    keep = [0]
+    for i in range(1, len(points) - 1):
+        a, b, c = points[i - 1], points[i], points[i + 1]
+        cross = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+        if abs(cross) > 1e-6 * float(np.sum((c - a) ** 2)):
+            keep.append(i)
+    return points[keep + [len(points) - 1]]
+
+
+def _unseen_car(rng):
+    """The car moved and scaled, a little shaken, with straight runs down to their two ends:
+    long steps next to short ones, where the choice of parameter shows."""
+    scale, shift = rng.uniform(0.5, 2.0), rng.uniform(-20.0, 20.0, 2)
+    strokes = []
+    for stroke in car():
+        closed = np.array_equal(stroke[0], stroke[-1])
+        pts = _thin_straights(stroke)
+        pts = pts + rng.normal(0.0, 0.003, pts.shape)
+        if closed:
+            pts[-1] = pts[0]
+        strokes.append(pts * scale + shift)
+    return strokes
+
+
+def _unseen_rounded_rectangle(rng):
+    """A rectangle with round corners: five points per corner, none along the sides."""
+    w, h = rng.uniform(4.0, 7.0), rng.uniform(1.5, 2.5)
+    r, k = rng.uniform(0.2, 0.3) * h, 5
+    corners = [(w - r, h - r, 0.0), (r, h - r, 90.0), (r, r, 180.0), (w - r, r, 270.0)]
+    pts = np.concatenate([
+        np.column_stack([cx + r * np.cos(np.radians(a0 + np.linspace(0.0, 90.0, k))),
+                         cy + r * np.sin(np.radians(a0 + np.linspace(0.0, 90.0, k)))])
+        for cx, cy, a0 in corners])
+    pts = np.vstack([pts[k // 2:], pts[:k // 2 + 1]])  # start and end in a corner, closed
+    return [pts * rng.uniform(0.5, 3.0) + rng.uniform(-20.0, 20.0, 2)]
+
+
+def _unseen_letter_s(rng):
+    """Two round ends, eight points each, joined by one long step: the parameter shows."""
+    a1 = np.radians(np.linspace(0.0, 270.0, 8))
+    a2 = np.radians(np.linspace(90.0, -180.0, 8))
+    pts = np.vstack([np.column_stack([np.cos(a1), 3.0 + np.sin(a1)]),
+                     np.column_stack([np.cos(a2), -3.0 + np.sin(a2)])])
+    turn = np.radians(rng.uniform(-20.0, 20.0))
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    return [pts @ rotation.T * rng.uniform(0.5, 3.0) + rng.uniform(-20.0, 20.0, 2)]
+
+
+#: name -> (strokes from rng, what the picture shows, weight); thresholds: see
+#: DRAWING_PASS and DRAWING_HALF in spline_feedback.py
+SHAPES = {
+    "unseen-car": (_unseen_car, "car", 2),
+    "unseen-rounded-rectangle": (_unseen_rounded_rectangle, "rounded rectangle", 2),
+    "unseen-letter-s": (_unseen_letter_s, "letter S", 2),
+}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(w))
+                                  for n, (_, _, w) in SHAPES.items()])
+def test_draw_car_unseen(student, credit, feedback, rng, name):
+    build, what, _ = SHAPES[name]
+    strokes = build(rng)
+    fig = student.draw_car(strokes)
+    judge.grade_drawing(fig, strokes, credit, feedback, what=what)

@@ -1,0 +1,399 @@
+"""Staged feedback on spline answers, shared by the public and the hidden checks.
+
+Coefficients are judged in stages, each with a message that says what is wrong
+and where: the type and shape of the array, the layout of each row (SciPy's
+order [d, c, b, a] or a transposed array is recognised and earns part of the
+points), then the defining properties of the natural cubic spline (passes
+through the points; S, S' and S'' continuous at every interior knot;
+S'' = 0 at both ends), and only then the values against the expected ones.
+The properties are read from the coefficients themselves, so a check can say
+*which* property fails, not only that a number differs.
+
+Drawings are judged by the distance between the drawn points and the
+reference drawing (:mod:`autograder.curves`), with the two pictures attached
+side by side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from autograder.compare import CheckFailure, describe, expect_array
+from autograder.curves import (
+    CurveDistance,
+    curve_points,
+    relative_curve_distance,
+    render_side_by_side,
+    strokes_points,
+)
+
+NAME = "spline_coefficients(x, y)"
+
+#: Fraction of a check's points kept when the spline is right but laid out in
+#: another convention: the mathematics is done, the interface is not.
+CONVENTION_FRACTION = 0.5
+
+SCIPY_ROWS = ("your coefficients are right but in SciPy's order [d, c, b, a]; "
+              "the assignment asks for [a, b, c, d]")
+SCIPY_C = ("your coefficients are right but laid out like SciPy's `c` array (shape "
+           "(4, n-1), rows d, c, b, a); the assignment asks for shape (n-1, 4) with one "
+           "row [a, b, c, d] per piece")
+TRANSPOSED = ("your coefficients are right but transposed: shape (4, n-1) instead of "
+              "(n-1, 4); the assignment asks for one row [a, b, c, d] per piece")
+
+#: Drawings: the relative Hausdorff distance (a fraction of the reference's
+#: bounding-box diagonal) allowed for full points, and for half the points.
+#: A correct drawing sampled at 200 points per stroke is within 0.001 of the
+#: reference and a coarse one (30 points per stroke) within 0.008; 0.02 of the
+#: car's diagonal (0.2 units) is where a difference starts to be visible.
+DRAWING_PASS = 0.02
+DRAWING_HALF = 0.08
+#: Fraction kept for a right drawing whose axes do not have equal aspect.
+ASPECT_FRACTION = 0.75
+#: Points per stroke sampled along the reference drawing (dense: the sampling
+#: gap must stay far below DRAWING_PASS).
+REFERENCE_SAMPLES = 2000
+
+
+def sentence(text: str) -> str:
+    return text[:1].upper() + text[1:] + "."
+
+
+def num(value: float) -> str:
+    """A number for a message: short, but never rounded to a misleading 0."""
+    return f"{value:.4g}"
+
+
+# ---------------------------------------------------------------------------
+# reading the coefficient array
+# ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Reading:
+    """The student's coefficients as rows [a, b, c, d], and the convention they broke."""
+
+    rows: np.ndarray
+    convention: str | None = None
+
+
+def read_coefficients(got: Any, x: np.ndarray, y: np.ndarray, *, name: str = NAME) -> Reading:
+    """Interpret ``got`` as ``(n-1, 4)`` rows [a, b, c, d], recognising SciPy's layouts.
+
+    Among the layouts that fit the shape, the one whose ``a`` column equals
+    ``y[:-1]`` (every piece starts at its data point) is chosen; if none does,
+    the layout the assignment asks for.
+    """
+    arr = expect_array(got, dtype_kind="biuf", name=name).astype(float)
+    pieces = len(x) - 1
+    layouts: list[tuple[np.ndarray, str | None]] = []
+    if arr.shape == (pieces, 4):
+        layouts += [(arr, None), (arr[:, ::-1], SCIPY_ROWS)]
+    if arr.shape == (4, pieces):
+        layouts += [(arr.T[:, ::-1], SCIPY_C), (arr.T, TRANSPOSED)]
+    if not layouts:
+        raise CheckFailure(_shape_message(arr.shape, pieces, name))
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        where = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise CheckFailure(f"{name} contains {arr[where]} at index {list(where)}; every "
+                           "coefficient should be a finite number. Look for a division by "
+                           "zero (are the gaps h_i right?) or an unsolved system.")
+    scale = float(np.max(np.abs(y))) or 1.0
+    for rows, convention in layouts:
+        if np.allclose(rows[:, 0], y[:-1], rtol=1e-9, atol=1e-12 * scale):
+            return Reading(np.ascontiguousarray(rows), convention)
+    return Reading(np.ascontiguousarray(layouts[0][0]), layouts[0][1])
+
+
+def _shape_message(shape: tuple[int, ...], pieces: int, name: str) -> str:
+    text = (f"{name} should return an array of shape (len(x) - 1, 4) = ({pieces}, 4): one row "
+            f"[a, b, c, d] for each of the {pieces} piece(s); got shape {shape}.")
+    if shape == (pieces + 1, 4):
+        text += (" That is one row too many: len(x) points make len(x) - 1 pieces "
+                 "(the last point only ends the last piece).")
+    elif len(shape) == 1 and shape[0] == 4 * pieces:
+        text += " Stack the rows into a 2-D array, e.g. np.column_stack([a, b, c, d])."
+    elif len(shape) == 2 and 4 in shape:
+        text += f" Each row is one piece; there are {pieces} pieces."
+    return text
+
+
+def finish(reading: Reading, credit: Any) -> None:
+    """End a check whose mathematics passed: full points, or part for a broken convention."""
+    if reading.convention is not None:
+        credit.partial(CONVENTION_FRACTION, sentence(reading.convention))
+
+
+def _with_convention(message: str, reading: Reading) -> str:
+    if reading.convention is None:
+        return message
+    return message + f" (Note: your array was read as rows [a, b, c, d] after reordering: " \
+                     f"{reading.convention}.)"
+
+
+# ---------------------------------------------------------------------------
+# properties of a natural cubic spline, read from its coefficients
+# ---------------------------------------------------------------------------
+
+def knot_values(rows: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """S, S', S'' at the left end (``x[i]``) and right end (``x[i+1]``) of each piece.
+
+    Returns two arrays of shape (3, n-1): row k is the k-th derivative.
+    """
+    a, b, c, d = rows.T
+    h = np.diff(x)
+    left = np.stack([a, b, 2.0 * c])
+    right = np.stack([a + h * (b + h * (c + h * d)), b + h * (2.0 * c + 3.0 * h * d),
+                      2.0 * c + 6.0 * h * d])
+    return left, right
+
+
+def _scales(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Size of S, S', S'' near each knot: max|y| / h**k with h the smaller neighbouring gap."""
+    h = np.diff(x)
+    near = np.minimum(np.r_[h, np.inf], np.r_[np.inf, h])  # at each knot
+    size = float(np.max(np.abs(y))) or 1.0
+    return np.stack([np.full_like(near, size), size / near, size / near**2])
+
+
+def check_passes_through(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: float) -> None:
+    """Piece i starts at (x[i], y[i]) and ends at (x[i+1], y[i+1])."""
+    left, right = knot_values(reading.rows, x)
+    tol = rtol * _scales(x, y)[0]
+    start_err = np.abs(left[0] - y[:-1])
+    if np.any(start_err > tol[:-1]):
+        i = int(np.argmax(start_err - tol[:-1]))
+        raise CheckFailure(_with_convention(
+            f"Your spline does not pass through the data: piece {i} (on [x[{i}], x[{i + 1}]]) "
+            f"starts at S({num(x[i])}) = a = {num(left[0, i])}, but y[{i}] = {num(y[i])}. "
+            f"Row i must start with a = y[i].", reading))
+    end_err = np.abs(right[0] - y[1:])
+    if np.any(end_err > tol[1:]):
+        i = int(np.argmax(end_err - tol[1:]))
+        raise CheckFailure(_with_convention(
+            f"Your spline does not pass through the data: piece {i} ends at "
+            f"S({num(x[i + 1])}) = a + b h + c h^2 + d h^3 = {num(right[0, i])} "
+            f"(h = x[{i + 1}] - x[{i}]), but y[{i + 1}] = {num(y[i + 1])}. Check b "
+            "(it depends on the slope (y[i+1] - y[i]) / h[i] and on M) and d.", reading))
+
+
+_DERIVATIVE = {0: ("S", "value"), 1: ("S'", "first derivative (slope)"),
+               2: ("S''", "second derivative")}
+_JUMP_HINT = {
+    0: " Each piece must end where the next one starts: check b and d.",
+    1: " A piecewise linear interpolant, or pieces fitted one at a time, has this problem: "
+       "the pieces must be tied together by the tridiagonal system for M.",
+    2: " Check the formulas for b, c and d in terms of M: S''(x_i) = 2c_i must equal M_i "
+       "from both sides.",
+}
+
+
+def check_continuity(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: float) -> None:
+    """S, S' and S'' agree from both sides at every interior knot."""
+    left, right = knot_values(reading.rows, x)
+    scales = _scales(x, y)
+    for k in (0, 1, 2):
+        jump = np.abs(right[k, :-1] - left[k, 1:])  # at interior knots x[1] .. x[n-2]
+        tol = rtol * scales[k, 1:-1]
+        if np.any(jump > tol):
+            j = int(np.argmax(jump / tol)) + 1
+            symbol, words = _DERIVATIVE[k]
+            raise CheckFailure(_with_convention(
+                f"The {words} of your spline jumps at the interior knot x[{j}] = {num(x[j])}: "
+                f"the piece on its left ends with {symbol} = {num(right[k, j - 1])}, the piece "
+                f"on its right starts with {symbol} = {num(left[k, j])}. A cubic spline has "
+                f"continuous S, S' and S'' at every interior knot.{_JUMP_HINT[k]}", reading))
+
+
+def check_natural_ends(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: float) -> None:
+    """S''(x[0]) = 0 and S''(x[n-1]) = 0."""
+    left, right = knot_values(reading.rows, x)
+    scales = _scales(x, y)[2]
+    ends = (("left", left[2, 0], scales[0], "x_0"), ("right", right[2, -1], scales[-1], "x_n"))
+    for side, value, scale, symbol in ends:
+        if abs(value) > rtol * scale:
+            raise CheckFailure(_with_convention(
+                f"The second derivative of your spline is not zero at the {side} end "
+                f"(S''({symbol}) = {value:.1e}). Natural end conditions set M_0 = S''(x_0) = 0 "
+                "and M_n = S''(x_n) = 0; zero *slopes* at the ends (a clamped spline) are "
+                "another spline.", reading))
+
+
+def check_values(reading: Reading, expected: np.ndarray, rtol: float) -> None:
+    """Each coefficient within ``rtol * (|expected| + largest |expected| in its column)``."""
+    got, want = reading.rows, np.asarray(expected, dtype=float)
+    bound = rtol * (np.abs(want) + np.max(np.abs(want), axis=0))
+    err = np.abs(got - want)
+    if np.any(err > bound):
+        i, k = (int(v) for v in np.unravel_index(np.argmax(err - bound), err.shape))
+        raise CheckFailure(_with_convention(
+            f"{NAME}: coefficient {'abcd'[k]} of piece {i} (row {i}, column {k}) should be "
+            f"{want[i, k]:.10g}; got {got[i, k]:.10g} (error {err[i, k]:.1e}, allowed "
+            f"{bound[i, k]:.1e}). {int((err > bound).sum())} of {err.size} coefficients are "
+            "outside the tolerance.", reading))
+
+
+def grade_coefficients(got: Any, x: np.ndarray, y: np.ndarray, expected: np.ndarray,
+                       credit: Any, *, rtol: float) -> None:
+    """All stages: layout, passes through the points, C2, natural ends, values."""
+    reading = read_coefficients(got, x, y)
+    check_passes_through(reading, x, y, rtol)
+    check_continuity(reading, x, y, rtol)
+    check_natural_ends(reading, x, y, rtol)
+    check_values(reading, expected, rtol)
+    finish(reading, credit)
+
+
+# ---------------------------------------------------------------------------
+# spline_eval
+# ---------------------------------------------------------------------------
+
+def where_is(t: float, x: np.ndarray) -> str:
+    """Where ``t`` lies among the knots, for a message."""
+    hits = np.flatnonzero(x == t)
+    if hits.size:
+        return f"the knot x[{int(hits[0])}]"
+    if t < x[0]:
+        return "left of x[0] (use the first piece there)"
+    if t > x[-1]:
+        return f"right of x[{len(x) - 1}] (use the last piece there)"
+    i = int(np.searchsorted(x, t, side="right")) - 1
+    return f"between x[{i}] and x[{i + 1}] (piece {i})"
+
+
+def grade_eval(got: Any, x: np.ndarray, t: np.ndarray, expected: np.ndarray, *,
+               rtol: float, retry_reversed: Callable[[], Any] | None = None,
+               credit: Any = None) -> None:
+    """Compare ``spline_eval`` values with the expected ones, saying where they differ.
+
+    If they differ and ``retry_reversed`` is given, it is called (it should
+    evaluate with every row reversed): when that matches, the student's
+    function reads rows as [d, c, b, a], which earns part of the points.
+    """
+    name = "spline_eval(x, coeffs, t)"
+    want = np.asarray(expected, dtype=float)
+    arr = expect_array(got, dtype_kind="biuf", name=name)
+    if arr.shape != want.shape:
+        raise CheckFailure(f"{name} should return one value per entry of t, an array of shape "
+                           f"{want.shape}; got {describe(got)}.")
+    arr = arr.astype(float)
+    scale = float(np.max(np.abs(want))) or 1.0
+    bound = rtol * (np.abs(want) + scale)
+    err = np.where(np.isfinite(arr), np.abs(arr - want), np.inf)
+    if not np.any(err > bound):
+        return
+    if retry_reversed is not None:
+        again = np.asarray(retry_reversed(), dtype=float)
+        if again.shape == want.shape and np.all(np.abs(again - want) <= bound):
+            credit.partial(CONVENTION_FRACTION,
+                           "Your spline_eval reads each row of coeffs as [d, c, b, a] (SciPy's "
+                           "order); the assignment's rows are [a, b, c, d], with "
+                           "S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + d (t - x_i)^3.")
+    k = int(np.argmax(err - bound))
+    raise CheckFailure(
+        f"{name} at t = {num(t.flat[k])}, {where_is(float(t.flat[k]), x)}, should be "
+        f"{want.flat[k]:.10g}; got {arr.flat[k]:.10g}. {int((err > bound).sum())} of "
+        f"{err.size} values are off. Find the piece i with x[i] <= t < x[i+1] and evaluate "
+        "a + b u + c u^2 + d u^3 with u = t - x[i] (not t).")
+
+
+# ---------------------------------------------------------------------------
+# drawings
+# ---------------------------------------------------------------------------
+
+def _alternatives(strokes: Sequence[np.ndarray]) -> dict[str, Callable[[], np.ndarray]]:
+    """Typical wrong drawings of ``strokes`` and the hint each one deserves."""
+    from reference.splines import parametric_spline
+
+    def drawn(**options: Any) -> Callable[[], np.ndarray]:
+        return lambda: np.concatenate(
+            [parametric_spline(s, **options).sample(REFERENCE_SAMPLES) for s in strokes])
+
+    def polyline() -> np.ndarray:
+        t = np.linspace(0.0, 1.0, 50)[:-1, None]
+        parts = [np.concatenate([a + t * (b - a) for a, b in zip(s[:-1], s[1:])] + [s[-1:]])
+                 for s in strokes]
+        return np.concatenate(parts)
+
+    return {
+        "Your curves match splines drawn with the point number as the parameter (s_k = k). "
+        "Use the chord length instead: s_0 = 0, s_k = s_(k-1) + |P_k - P_(k-1)|, so that "
+        "short and long steps between points get short and long stretches of parameter.":
+            drawn(parametrization="uniform"),
+        "Your curves look like straight lines between the points: draw each stroke as the "
+        "two splines x(s) and y(s), sampled at many values of s (e.g. 200).": polyline,
+        "Your curves match splines with zero slope at their ends; use natural end conditions "
+        "(S'' = 0 at both ends).": drawn(bc_type="clamped"),
+    }
+
+
+def _gap_message(dist: CurveDistance, what: str) -> str:
+    parts = []
+    if dist.forward_relative > DRAWING_PASS:
+        if dist.forward_at is None:
+            parts.append(f"the {what} is missing from your drawing: it has no curves")
+        else:
+            x, y = dist.forward_at
+            parts.append(f"parts of the {what} are missing from your drawing (the farthest "
+                         f"reference point is {dist.forward:.2g} units from any of your curves, "
+                         f"near ({x:.1f}, {y:.1f}))")
+    if dist.backward_relative > DRAWING_PASS and dist.backward_at is not None:
+        x, y = dist.backward_at
+        parts.append(f"your drawing has extra parts (e.g. near ({x:.1f}, {y:.1f}), "
+                     f"{dist.backward:.2g} units from the reference)")
+    return "; ".join(parts)
+
+
+def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Any, feedback: Any, *,
+                  what: str = "car", name: str = "draw_car(strokes)") -> None:
+    """Judge a drawing of ``strokes`` and attach it beside the reference.
+
+    Full points when the relative Hausdorff distance is at most
+    ``DRAWING_PASS`` (and the axes have equal aspect), half up to
+    ``DRAWING_HALF``, none beyond; messages say what is missing or extra.
+    """
+    strokes = [np.asarray(s, dtype=float) for s in strokes]
+    png = fig.get("png") if isinstance(fig, dict) else None
+    feedback.image(f"your {what} beside the reference", render_side_by_side(
+        png, strokes, title=f"{name}: your drawing (left) and the reference (right)"))
+    if not isinstance(fig, dict) or not isinstance(fig.get("axes"), list):
+        raise CheckFailure(f"{name} should return the matplotlib Figure it drew on "
+                           "(fig, ax = plt.subplots() ... return fig); got "
+                           f"{describe(fig)}.")
+    points = curve_points(fig)
+    if len(points) == 0:
+        raise CheckFailure(f"The figure returned by {name} has no curves on it. Draw each "
+                           "stroke with ax.plot on the axes of the figure you return.")
+    reference = strokes_points(strokes, num=REFERENCE_SAMPLES)
+    dist = relative_curve_distance(points, reference)
+    if dist.worst <= DRAWING_PASS:
+        if not any(ax.get("aspect") == "equal" for ax in fig["axes"] if isinstance(ax, dict)):
+            credit.partial(ASPECT_FRACTION,
+                           f"Your {what} is right, but the axes do not have equal aspect, so "
+                           "circles look like ellipses: call ax.set_aspect('equal').")
+        return
+    message = (f"Your drawing is {dist.worst:.1%} of the {what}'s size (the diagonal of its "
+               f"bounding box, {dist.scale:.3g} units) away from the reference; up to "
+               f"{DRAWING_PASS:.0%} is allowed: {_gap_message(dist, what)}. Compare the two "
+               "pictures attached.")
+    hint = _diagnose(points, strokes, dist)
+    if hint:
+        message += " " + hint
+    if dist.worst <= DRAWING_HALF:
+        credit.partial(0.5, message)
+    raise CheckFailure(message)
+
+
+def _diagnose(points: np.ndarray, strokes: Sequence[np.ndarray], dist: CurveDistance) -> str:
+    """The hint of the typical mistake the drawing matches, if any."""
+    for hint, build in _alternatives(strokes).items():
+        try:
+            other = relative_curve_distance(points, build())
+        except ValueError:
+            continue
+        if other.worst <= DRAWING_PASS / 2 and other.worst < dist.worst / 2:
+            return hint
+    return ""
