@@ -9,6 +9,7 @@ waits on student code without a deadline.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import signal
@@ -64,11 +65,38 @@ class RunReport:
     notes: tuple[str, ...] = ()
 
 
+#: where slots are claimed (one lock file per sandbox user), shared by every grader here
+SLOT_LOCKS = Path(tempfile.gettempdir()) / "autograder-slots"
+MAX_SLOTS = 1000
+
+
+def claim_slot(first: int = 0) -> tuple[int, int]:
+    """Claim a slot number no other grader on this machine holds; return (slot, lock fd).
+
+    The slot picks the sandbox's user id (``base_uid + slot``), and the grader kills
+    every process of that user after each submission, so two graders running at the
+    same time (two courses, two CI jobs) must never share one. An exclusive
+    ``flock`` held for the slot's lifetime guarantees that, and the kernel releases
+    it if the grader dies.
+    """
+    SLOT_LOCKS.mkdir(mode=0o700, exist_ok=True)
+    for slot in range(first, first + MAX_SLOTS):
+        fd = os.open(SLOT_LOCKS / f"{slot}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        return slot, fd
+    raise AutograderError(f"all {MAX_SLOTS} worker slots in {SLOT_LOCKS} are taken; "
+                          "is another grader stuck?")
+
+
 class WorkerSlot:
     """One warm parent process; forks a sandboxed child per submission."""
 
     def __init__(self, *, slot: int = 0, python: str = sys.executable) -> None:
-        self.slot = slot
+        self.slot, self._lock = claim_slot(slot)
         self._python = python
         self._proc: subprocess.Popen[bytes] | None = None
         self._control: socket.socket | None = None
@@ -143,6 +171,9 @@ class WorkerSlot:
     def shutdown(self) -> None:
         self.close()
         shutil.rmtree(self._home, ignore_errors=True)
+        if self._lock >= 0:
+            os.close(self._lock)
+            self._lock = -1
 
     def __enter__(self) -> "WorkerSlot":
         return self

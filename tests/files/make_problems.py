@@ -103,7 +103,7 @@ PROBLEMS: dict[str, tuple[object, dict[str, object]]] = {
     "exit-when-called": (nb(SOLUTION, "import os\ndef convex_hull(points):\n    os._exit(0)"),
                          {"score": "partial", "outcome": "graded", "contains": ["ended the worker"]}),
     "kill-grader": (nb(
-        "import os, signal\nfor pid in [os.getppid(), 1] + [int(p) for p in os.listdir('/proc') if p.isdigit()]:\n"
+        "import os, signal\nme = os.getpid()\nfor pid in [os.getppid(), 1] + [int(p) for p in os.listdir('/proc') if p.isdigit() and int(p) != me]:\n"
         "    try:\n        os.kill(pid, signal.SIGKILL)\n    except OSError:\n        pass",
         "import os\ntry:\n    os.killpg(os.getpgid(os.getppid()), 9)\nexcept OSError:\n    pass",
         SOLUTION), {"score": "1", "outcome": "graded"}),

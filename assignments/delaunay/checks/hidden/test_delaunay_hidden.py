@@ -74,11 +74,10 @@ CIRCLE_65 = _integer_circle(65)  # 36 points: exactly cocircular integers
 
 def _float_inside(a, b, c, d) -> bool:
     """The textbook determinant (translated to d) in floating point: what the checks fool."""
-    adx, ady, bdx, bdy = a[0] - d[0], a[1] - d[1], b[0] - d[0], b[1] - d[1]
-    cdx, cdy = c[0] - d[0], c[1] - d[1]
-    det = ((adx * adx + ady * ady) * (bdx * cdy - cdx * bdy)
-           + (bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy)
-           + (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady))
+    (ax_, ay_), (bx_, by_), (cx_, cy_) = ((p[0] - d[0], p[1] - d[1]) for p in (a, b, c))
+    det = ((ax_ * ax_ + ay_ * ay_) * (bx_ * cy_ - cx_ * by_)
+           + (bx_ * bx_ + by_ * by_) * (cx_ * ay_ - ax_ * cy_)
+           + (cx_ * cx_ + cy_ * cy_) * (ax_ * by_ - bx_ * ay_))
     return bool(det > 0)
 
 

@@ -116,13 +116,15 @@ def check_indices(tri: np.ndarray, n: int) -> None:
 
 def clockwise_note(tri: np.ndarray, clockwise: Sequence[int]) -> str:
     k = int(clockwise[0])
-    if len(clockwise) == len(tri):
-        scope = f"all {len(tri)} triangles are clockwise"
+    if len(tri) == 1:
+        scope = ""
+    elif len(clockwise) == len(tri):
+        scope = f" (all {len(tri)} triangles are clockwise)"
     elif len(clockwise) > 1:
-        scope = f"{len(clockwise)} of {len(tri)} triangles are clockwise"
+        scope = f" ({len(clockwise)} of {len(tri)} triangles are clockwise)"
     else:
-        scope = "it is the only one"
-    return (f"triangle {k} {show_triangle(tri[k])} is clockwise ({scope}): list the vertices "
+        scope = " (the only one)"
+    return (f"triangle {k} {show_triangle(tri[k])} is clockwise{scope}: list the vertices "
             "of every triangle counter-clockwise")
 
 
@@ -325,7 +327,7 @@ def judge_figure(figure: Any, points: Any, triangles: Any, u: Any) -> None:
     samples = pts[tri[::step]].mean(axis=1)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     slack = 0.01 * float(np.max(hi - lo))
-    best_share, coloured = 0.0, []
+    best_share, coloured, misplaced = 0.0, [], 0
     for ax in figure["axes"]:
         for coll in ax.get("collections", []):
             segments = [s for s in coll.get("segments", []) if len(s)]
@@ -333,20 +335,28 @@ def judge_figure(figure: Any, points: Any, triangles: Any, u: Any) -> None:
                 continue
             vertices = np.vstack([np.asarray(s, dtype=float).reshape(-1, 2) for s in segments])
             vertices = vertices[np.all(np.isfinite(vertices), axis=1)]
-            if (len(vertices) == 0 or np.any(vertices.min(axis=0) < lo - slack)
-                    or np.any(vertices.max(axis=0) > hi + slack)):
+            if len(vertices) == 0:
+                continue
+            if np.any(vertices.min(axis=0) < lo - slack) or np.any(vertices.max(axis=0) > hi + slack):
+                misplaced += 1
                 continue
             share = float(_covered(segments, samples).mean())
             best_share = max(best_share, share)
             if share >= COVERAGE:
                 coloured.append(coll)
     if not coloured:
+        if best_share:
+            found = f"the best filled area covers only {best_share:.0%} of the triangles"
+        elif misplaced:
+            found = (f"what it fills reaches outside the points, which lie in x from "
+                     f"{lo[0]:.6g} to {hi[0]:.6g} and y from {lo[1]:.6g} to {hi[1]:.6g} "
+                     "(x and y swapped?)")
+        else:
+            found = "it has no filled area"
         raise CheckFailure(
-            "Your figure has no filled area over the mesh: "
-            + (f"the best one covers {best_share:.0%} of the triangles. " if best_share else "")
-            + "Fill the triangles with colours of u, e.g. "
-            "ax.tricontourf(x, y, triangles, u, 20) or ax.tripcolor(x, y, triangles, u), "
-            "with x and y the columns of `points`.")
+            f"Your figure does not fill the mesh: {found}. Fill the triangles with colours "
+            "of u, e.g. ax.tricontourf(x, y, triangles, u, 20) or ax.tripcolor(x, y, "
+            "triangles, u), where x and y are the columns of `points`.")
     _check_colours(coloured, u)
 
 

@@ -78,7 +78,11 @@ def show(value: Any) -> str:
 
 
 def _sentence(parts: Sequence[str]) -> str:
-    return " ".join(p[:1].upper() + p[1:] + ("" if p.endswith(".") else ".") for p in parts)
+    """Join clauses as sentences; a clause that starts with code keeps its case."""
+    def capital(p: str) -> str:
+        first = p.split(" ", 1)[0]
+        return p if not first.isalpha() else p[:1].upper() + p[1:]
+    return " ".join(capital(p) + ("" if p.endswith(".") else ".") for p in parts)
 
 
 # ---------------------------------------------------------------------------
@@ -146,9 +150,9 @@ def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit:
 
 def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
     parts = []
-    if arr[0] != -1.0 or arr[-1] != 1.0:
-        parts.append(f"the nodes should run from -1 to 1; yours run from {show(arr[0])} to "
-                     f"{show(arr[-1])}")
+    if abs(arr[0] - expected[0]) > NODE_ATOL or abs(arr[-1] - expected[-1]) > NODE_ATOL:
+        parts.append(f"the nodes should run from {show(expected[0])} to {show(expected[-1])}; "
+                     f"yours run from {show(arr[0])} to {show(arr[-1])}")
     steps = np.flatnonzero(np.diff(arr) <= 0)
     if steps.size:
         j = int(steps[0])
@@ -408,12 +412,14 @@ def _count(k: int) -> str:
 
 
 def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[Curve],
-                     nearby: Sequence[Curve] = (), credit: Any, note: str = "") -> None:
+                     nearby: Mapping[str, Sequence[Curve]] | None = None, credit: Any,
+                     note: str = "") -> None:
     """Find each wanted curve among the drawn ones (by values, not labels or colours).
 
     Each wanted curve is worth an equal share; one that does not reach both
-    ends of [-1, 1] gets half its share. ``nearby`` are curves that a common
-    mistake draws instead (other degrees); they only sharpen the message.
+    ends of [-1, 1] gets half its share. ``nearby`` maps a wanted curve's name
+    to curves that a common mistake draws instead (other degrees); they only
+    sharpen the message.
     """
     curves = drawn_curves(figure)
     share, score, parts, found = 1.0 / len(wanted), 0.0, [], []
@@ -430,7 +436,7 @@ def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[C
                 parts.append(f"{curve.name} in your plot covers only [{x.min():.3g}, "
                              f"{x.max():.3g}]; draw it over the whole interval [-1, 1]")
             continue
-        parts.append(_missing(curve, curves, errors, best, nearby))
+        parts.append(_missing(curve, curves, errors, best, (nearby or {}).get(curve.name, ())))
     if note:
         score *= FRACTIONS["no-return"]
         parts.append(note)
@@ -450,7 +456,7 @@ def _missing(curve: Curve, curves: list, errors: list, best: int, nearby: Sequen
                 f"least {MIN_CURVE_POINTS} points)")
     text = f"I could not find {curve.name} among {_count(len(curves))}"
     for other in nearby:
-        if curve_error(curves[best], other.fn)[0] <= CURVE_RTOL:
-            return text + f"; your closest curve is {other.name}"
+        if any(curve_error(c, other.fn)[0] <= CURVE_RTOL for c in curves):
+            return text + f"; one of your curves is {other.name}"
     err, x = errors[best]
     return text + f" (the closest one is off by {err:.2g} at x = {x:.3g})"

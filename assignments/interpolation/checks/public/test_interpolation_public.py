@@ -168,10 +168,10 @@ def test_plot_runge_10(student, credit, feedback):
     wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
               fb.Curve("the equispaced interpolant", fitted(equispaced)),
               fb.Curve("the Chebyshev interpolant", fitted(chebyshev))]
-    nearby = [fb.Curve(f"the {name} interpolant of degree {m} ({m + 1} nodes), but "
-                       f"{call} asks for degree {n} ({n + 1} nodes)", fitted(nodes(m)))
-              for m in (n - 1, n + 1)
-              for name, nodes in (("equispaced", lambda k: np.linspace(-1, 1, k + 1)),
-                                  ("Chebyshev", cheb2))]
+    families = {"equispaced": lambda k: np.linspace(-1.0, 1.0, k + 1), "Chebyshev": cheb2}
+    nearby = {f"the {name} interpolant": [
+        fb.Curve(f"the {name} interpolant of degree {m} ({m + 1} nodes), but {call} asks for "
+                 f"degree {n} ({n + 1} nodes)", fitted(nodes(m))) for m in (n - 1, n + 1)]
+        for name, nodes in families.items()}
     fb.judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit,
                         note=note)
