@@ -111,7 +111,8 @@ def _axes_pieces(axes: Mapping[str, Any]) -> tuple[list[NDArray[np.float64]],
     return polylines, scattered
 
 
-def curve_points(figure: Mapping[str, Any], *, samples_per_segment: int = 20) -> NDArray[np.float64]:
+def curve_points(figure: Mapping[str, Any], *,
+                 samples_per_segment: int = 20) -> NDArray[np.float64]:
     """Every point a figure draws, in data coordinates, as one ``(k, 2)`` array.
 
     Parameters
@@ -255,6 +256,7 @@ class CurveDistance:
         return max(self.forward_relative, self.backward_relative)
 
     def to_dict(self) -> dict[str, Any]:
+        """The fields and ``worst`` as plain data."""
         return {"forward": self.forward, "backward": self.backward, "scale": self.scale,
                 "forward_at": self.forward_at, "backward_at": self.backward_at,
                 "worst": self.worst}
@@ -350,7 +352,8 @@ def render_side_by_side(student_png: bytes | None, reference_strokes: Sequence[A
     image = _decode_png(student_png)
     left.set_axis_off()
     if image is None:
-        left.text(0.5, 0.5, "no picture of your drawing\n(the figure could not be rendered)",
+        left.text(0.5, 0.5, "no picture of your drawing\n(no figure came back, or it could "
+                  "not be rendered)",
                   ha="center", va="center", fontsize=12, transform=left.transAxes)
     else:
         left.imshow(image)

@@ -162,6 +162,8 @@ class Grader:
             attachments=(out_dir / "images") if out_dir is not None else None)
         plugin = GradingPlugin(context)
         run_pytest(self.check_files, self.assignment.root, plugin)
+        if not plugin.collection_errors and not plugin.results:
+            plugin.collection_errors.append("no checks were collected")
         if plugin.collection_errors:
             raise AssignmentError(
                 f"The checks of assignment {self.assignment.name!r} could not be collected; "

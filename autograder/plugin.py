@@ -12,7 +12,7 @@ import traceback
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -153,11 +153,22 @@ class GradingPlugin:
         name, _ = check_name(item)
         self._feedback = Feedback(self.context.attachments, name)
 
-    @pytest.hookimpl(hookwrapper=True)
-    def pytest_runtest_makereport(self, item: pytest.Item, call: pytest.CallInfo[None]) -> Iterator[None]:
-        yield
-        if call.when == "call" or (call.when == "setup" and call.excinfo is not None):
-            self._record(item, call.excinfo.value if call.excinfo else None)
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_runtest_makereport(self, item: pytest.Item, call: pytest.CallInfo[None]) -> pytest.TestReport:
+        """Record the verdict and answer with a bare report.
+
+        pytest's own report would format the failing check's traceback with its
+        source: costly (most of the grader's time on a wrong submission) and never
+        shown, since the verdict and its message are recorded here.
+        """
+        exc = call.excinfo.value if call.excinfo is not None else None
+        if call.when == "call" or (call.when == "setup" and exc is not None):
+            self._record(item, exc)
+        outcome = "passed" if exc is None else "failed"
+        return pytest.TestReport(item.nodeid, item.location, {}, outcome,
+                                 None if exc is None else "recorded by the grading plugin",
+                                 call.when, duration=call.duration, start=call.start,
+                                 stop=call.stop)
 
     def _record(self, item: pytest.Item, exc: BaseException | None) -> None:
         name, dataset = check_name(item)

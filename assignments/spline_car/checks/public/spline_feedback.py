@@ -209,17 +209,22 @@ def check_continuity(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: float
 
 
 def check_natural_ends(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: float) -> None:
-    """S''(x[0]) = 0 and S''(x[n-1]) = 0."""
+    """S''(x[0]) = 0 and S''(x[n-1]) = 0; a clamped spline (zero end slopes) is named."""
     left, right = knot_values(reading.rows, x)
-    scales = _scales(x, y)[2]
-    ends = (("left", left[2, 0], scales[0], "x_0"), ("right", right[2, -1], scales[-1], "x_n"))
+    scales = _scales(x, y)
+    ends = (("left", left[2, 0], scales[2, 0], "x_0"),
+            ("right", right[2, -1], scales[2, -1], "x_n"))
     for side, value, scale, symbol in ends:
         if abs(value) > rtol * scale:
+            clamped = (abs(left[1, 0]) <= rtol * scales[1, 0]
+                       and abs(right[1, -1]) <= rtol * scales[1, -1])
+            hint = ("Your spline has zero slope at both ends instead: that is the clamped "
+                    "spline, S'(x_0) = S'(x_n) = 0." if clamped else
+                    "Check the first and last rows of your system (or how you set M_0 and M_n).")
             raise CheckFailure(_with_convention(
                 f"The second derivative of your spline is not zero at the {side} end "
                 f"(S''({symbol}) = {value:.1e}). Natural end conditions set M_0 = S''(x_0) = 0 "
-                "and M_n = S''(x_n) = 0; zero *slopes* at the ends (a clamped spline) are "
-                "another spline.", reading))
+                f"and M_n = S''(x_n) = 0. {hint}", reading))
 
 
 def check_values(reading: Reading, expected: np.ndarray, rtol: float) -> None:
@@ -375,7 +380,8 @@ def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Any, feedback
                            f"Your {what} is right, but the axes do not have equal aspect, so "
                            "circles look like ellipses: call ax.set_aspect('equal').")
         return
-    message = (f"Your drawing is {dist.worst:.1%} of the {what}'s size (the diagonal of its "
+    far = f"{dist.worst:.1%} of" if dist.worst < 1.0 else f"{dist.worst:.3g} times"
+    message = (f"Your drawing is {far} the {what}'s size (the diagonal of its "
                f"bounding box, {dist.scale:.3g} units) away from the reference; up to "
                f"{DRAWING_PASS:.0%} is allowed: {_gap_message(dist, what)}. Compare the two "
                "pictures attached.")
