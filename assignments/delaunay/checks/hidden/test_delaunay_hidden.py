@@ -27,9 +27,9 @@ doi:10.1007/PL00009321
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -329,7 +329,6 @@ def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool):
     """A judge (see the feedback module) using exact predicates only."""
     n = len(points)
     hull = len(fb.boundary_edges(expected))
-    count = len(expected)
 
     def judge(tri: np.ndarray) -> tuple[float, list[str]]:
         fb.check_indices(tri, n)
@@ -346,7 +345,8 @@ def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool):
         _check_overlaps(tri, fixed)
         _check_coverage(points, tri, fixed, expected, hull)
         _check_empty_circles(points, tri, fixed)
-        if not is_delaunay(points, fixed) or (general and _sorted_set(fixed) != _sorted_set(expected)):
+        differs = general and _sorted_set(fixed) != _sorted_set(expected)
+        if differs or not is_delaunay(points, fixed):
             raise CheckFailure("Your triangles do not form the Delaunay triangulation of the "
                                "points (they overlap or leave gaps).")
         if clockwise.size:
@@ -381,15 +381,30 @@ def _check_coverage(points, tri, fixed, expected, hull) -> None:
     if not unused and beyond is None and m == count:
         return
     parts = [fb.count_message(count, n, hull, m)] if m != count else []
+    inside = _vertex_inside(points, fixed) if m > count else None
+    if inside is not None:
+        q, k = inside
+        raise CheckFailure(fb.sentence(
+            f"{parts[0]}: point {q} lies strictly inside triangle {k} "
+            f"{fb.show_triangle(tri[k])}, so some triangles overlap"))
     near_hull = _missing_near_hull(fixed, expected)
-    if near_hull:
-        parts.append(f"the triangles along the hull are missing ({fb.SUPER_HINT})")
-    elif near_hull is False:
-        parts.append("your mesh has a hole: some triangles inside it are missing")
-    if beyond is not None:
+    if near_hull is False:
+        hull_edges = set(fb.boundary_edges(expected))
+        u, v = next(e for e in fb.boundary_edges(fixed) if e not in hull_edges)
+        parts.append(f"your mesh has a hole: the edge ({u}, {v}) inside the hull has a "
+                     "triangle on one side only")
+    elif beyond is not None:
         u, v, q = beyond
-        parts.append(f"point {q} at {fb.show_point(points[q])} lies outside your mesh, "
-                     f"beyond its edge ({u}, {v})")
+        if near_hull:
+            parts.append(f"the triangles along the hull are missing ({fb.SUPER_HINT}); "
+                         f"point {q} at {fb.show_point(points[q])} lies outside your mesh, "
+                         f"beyond its edge ({u}, {v})")
+        else:
+            parts.append(f"point {q} at {fb.show_point(points[q])} lies beyond the edge "
+                         f"({u}, {v}), which has a triangle on one side only: the mesh "
+                         "does not fill the convex hull")
+    elif near_hull:
+        parts.append(f"the triangles along the hull are missing ({fb.SUPER_HINT})")
     if unused:
         q = unused[0]
         parts.append(f"point {q} at {fb.show_point(points[q])} is a corner of no triangle"
@@ -400,6 +415,23 @@ def _check_coverage(points, tri, fixed, expected, hull) -> None:
     raise CheckFailure(fb.sentence(text))
 
 
+def _vertex_inside(points: np.ndarray, fixed: np.ndarray, limit: int = 5000):
+    """``(q, k)``: a point strictly inside counter-clockwise triangle ``k`` (exact), or None."""
+    corners = points[fixed]
+    low, high = corners.min(axis=1), corners.max(axis=1)
+    for k in range(min(len(fixed), limit)):
+        near = np.flatnonzero(np.all((points > low[k]) & (points < high[k]), axis=1))
+        if near.size == 0:
+            continue
+        a, b, c = corners[k]
+        q = points[near]
+        strictly = ((_orient2d_many(a, b, q) > 0) & (_orient2d_many(b, c, q) > 0)
+                    & (_orient2d_many(c, a, q) > 0))
+        if strictly.any():
+            return int(near[np.argmax(strictly)]), k
+    return None
+
+
 def _check_empty_circles(points, tri, fixed) -> None:
     """Fail at the first interior edge that is not locally Delaunay (exact)."""
     pairs = _interior_pairs(fixed)
@@ -408,7 +440,7 @@ def _check_empty_circles(points, tri, fixed) -> None:
     p = points
     inside = _incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]]) > 0
     if inside.any():
-        u, v, w, z, k = (int(x) for x in pairs[np.argmax(inside)])
+        u, v, _, z, k = (int(x) for x in pairs[np.argmax(inside)])
         raise CheckFailure(
             f"Point {z} lies strictly inside the circumcircle of triangle {k} "
             f"{fb.show_triangle(tri[k])}, so that triangle is not Delaunay (flip the edge "

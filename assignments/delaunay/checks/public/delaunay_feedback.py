@@ -19,7 +19,8 @@ orientation.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.path import Path
@@ -145,9 +146,10 @@ def grade_triangulation(got: Any, n: int, judge: Judge, credit: Any) -> None:
                                f"Even counted from 1 your triangles are not right: {second}"
                                ) from None
         fraction *= FRACTIONS["one-based"]
-        notes = [f"indices must start at 0: your triangles are right with every index "
-                 f"counted from 1 (you use 1 to {int(tri.max())} for {n} points), so "
-                 "subtract 1"] + notes
+        shifted = (f"indices must start at 0: your triangles are right with every index "
+                   f"counted from 1 (you use 1 to {int(tri.max())} for {n} points), so "
+                   "subtract 1")
+        notes = [shifted, *notes]
     if notes:
         credit.partial(fraction, sentence("; ".join(notes)))
 
@@ -189,7 +191,8 @@ def known_answer_judge(points: Any, answers: Sequence[Any]) -> Judge:
     def judge(tri: np.ndarray) -> tuple[float, list[str]]:
         check_indices(tri, n)
         got = [tuple(sorted(t)) for t in tri.tolist()]
-        best = max(options, key=lambda a: len(set(got) & {tuple(sorted(t)) for t in a.tolist()}))
+        best = max(options, key=lambda a: len(set(got) & {tuple(sorted(t))
+                                                         for t in a.tolist()}))
         ccw = {tuple(sorted(t)): tuple(t) for t in best.tolist()}
         missing = [t for t in best.tolist() if tuple(sorted(t)) not in set(got)]
         extra = [k for k, t in enumerate(got) if t not in ccw]
@@ -205,7 +208,8 @@ def known_answer_judge(points: Any, answers: Sequence[Any]) -> Judge:
 
 
 def _same_rotation(t: Sequence[int], ccw: Sequence[int]) -> bool:
-    return tuple(t) in {tuple(ccw), tuple(ccw[1:]) + tuple(ccw[:1]), tuple(ccw[2:]) + tuple(ccw[:2])}
+    c = tuple(ccw)
+    return tuple(t) in {c, c[1:] + c[:1], c[2:] + c[:2]}
 
 
 def _difference(pts: np.ndarray, tri: np.ndarray, best: np.ndarray,
@@ -337,7 +341,8 @@ def judge_figure(figure: Any, points: Any, triangles: Any, u: Any) -> None:
             vertices = vertices[np.all(np.isfinite(vertices), axis=1)]
             if len(vertices) == 0:
                 continue
-            if np.any(vertices.min(axis=0) < lo - slack) or np.any(vertices.max(axis=0) > hi + slack):
+            if (np.any(vertices.min(axis=0) < lo - slack)
+                    or np.any(vertices.max(axis=0) > hi + slack)):
                 misplaced += 1
                 continue
             share = float(_covered(segments, samples).mean())
