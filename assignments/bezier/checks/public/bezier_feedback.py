@@ -1,0 +1,449 @@
+"""Staged feedback on Bezier answers, shared by the public and the hidden checks.
+
+Two kinds of answer are judged here:
+
+* a **point** on the curve, from ``eval_bezier(ctrl, t)`` or ``de_casteljau(ctrl, t)``:
+  type, then shape (one point of shape ``(d,)``, not a row ``(1, d)`` nor the
+  whole triangle of levels), then finite values, then the values themselves;
+  at ``t = 0`` and ``t = 1`` the endpoint checks also ask for exact equality
+  with the first and last control points;
+* the two **control polygons** from ``split_bezier(ctrl, t)``: a pair of
+  ``(n + 1, d)`` arrays, checked against the expected polygons, then against
+  the known slips (pieces swapped, a piece listed backwards), and when the
+  answer is wrong the message goes in stages: ends of the pieces, the cut
+  point, then the shape of each piece along the curve.
+
+A judge returns when the answer is right, notes a broken convention in a
+:class:`Verdict` (which ends the check with partial credit once every case was
+looked at), and raises ``CheckFailure`` when the answer is wrong.
+
+The caller computes the expected values; the only curve evaluation done here
+is :func:`curve_points`, an independent oracle (``scipy.interpolate.BPoly``,
+fine up to degree 40 or so) used to describe where a student's polygon goes.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import BPoly
+
+from autograder.compare import CheckFailure, describe, expect_array
+from autograder.errors import CallTimeout, StudentException
+
+#: Share of a check's points kept for each convention broken (multiplied together).
+FRACTIONS = {
+    "levels": 0.5,       # de_casteljau returned the whole triangle; its last level is right
+    "row": 0.5,          # the right point, as an array of shape (1, d) instead of (d,)
+    "inexact-end": 0.5,  # the first/last control point up to rounding, not exactly
+    "swapped": 0.5,      # split_bezier returned (right, left)
+    "reversed": 0.5,     # a piece's control points listed from its end back to its start
+}
+
+#: How to get the endpoints exactly, per function (shown when they are off by rounding).
+EXACT_HINTS = {
+    "eval_bezier": (
+        "At t = 0 every Bernstein weight is exactly 0 except B_{0,n}(0) = 1, and at t = 1 "
+        "every one is 0 except B_{n,n}(1) = 1. Compute t**i and (1 - t)**(n - i) with ** "
+        "(0.0 ** 0 is 1.0), not through exp and log, and nothing is rounded."),
+    "de_casteljau": (
+        "Write each step as (1 - t) * P + t * Q: at t = 1 it gives Q exactly. The form "
+        "P + t * (Q - P) is the same in exact arithmetic, but with floats P + (Q - P) can "
+        "differ from Q in the last bit."),
+}
+
+#: Shown when a call of ``fn`` runs out of time.
+TIMEOUT_HINTS = {
+    "de_casteljau": (
+        "A de_casteljau that calls itself twice per step (once on ctrlpts[:-1] and once on "
+        "ctrlpts[1:]) does about 2**n interpolations: 10**12 for n = 40. Build the triangle "
+        "level by level instead: n (n + 1) / 2 interpolations, each level one numpy "
+        "expression on the previous one."),
+    "split_bezier": (
+        "Compute the de Casteljau triangle once, level by level, and read both pieces off "
+        "it: n (n + 1) / 2 interpolations in all."),
+}
+
+#: How the right pieces of the triangle make the two control polygons.
+SPLIT_HINT = ("The left control points are the first points of the de Casteljau levels, "
+              "P_0^(0), P_0^(1), ..., P_0^(n); the right ones are the last points, read from "
+              "the apex back down: P_0^(n), P_1^(n-1), ..., P_n^(0).")
+
+
+# ---------------------------------------------------------------------------
+# writing numbers and calls
+# ---------------------------------------------------------------------------
+
+def show_number(value: Any) -> str:
+    """A number written so that pasting it back gives exactly the same double."""
+    value = float(value)
+    return repr(int(value)) if value.is_integer() and abs(value) < 2.0**53 else repr(value)
+
+
+def show_point(p: Any, digits: int | None = None) -> str:
+    """A point, each coordinate exact (``digits=None``) or to ``digits`` significant digits."""
+    if digits is None:
+        return "(" + ", ".join(show_number(c) for c in np.ravel(p)) + ")"
+    return "(" + ", ".join(f"{float(c):.{digits}g}" for c in np.ravel(p)) + ")"
+
+
+#: Significant digits when showing values that are compared with a tolerance.
+DIGITS = 12
+
+
+def show_polygon(ctrl: np.ndarray) -> str:
+    """Short polygons in full; longer ones by their degree and dimension."""
+    ctrl = np.asarray(ctrl, dtype=float)
+    if len(ctrl) <= 4 and ctrl.shape[1] <= 3:
+        return "[" + ", ".join(show_point(p) for p in ctrl) + "]"
+    return f"<degree-{len(ctrl) - 1} polygon in {ctrl.shape[1]}-D>"
+
+
+def call_text(fn: str, ctrl: np.ndarray, t: float) -> str:
+    return f"{fn}(ctrl, {show_number(t)}) with ctrl = {show_polygon(ctrl)}"
+
+
+def size(ctrl: np.ndarray) -> float:
+    """The scale of a polygon, for tolerances relative to it: max |coordinate|, at least 1."""
+    return max(1.0, float(np.max(np.abs(ctrl))))
+
+
+def _sentence(text: str) -> str:
+    return text[:1].upper() + text[1:]
+
+
+# ---------------------------------------------------------------------------
+# calling the student
+# ---------------------------------------------------------------------------
+
+def ask(student: Any, fn: str, ctrl: np.ndarray, t: float, *, hint: str = "",
+        timeout: float | None = None) -> Any:
+    """``student.<fn>(ctrl, t)``; overflow, time-outs and deep recursion come back explained.
+
+    Other exceptions of the student's code pass through (the plugin reports them
+    with the traceback).
+    """
+    try:
+        value, _ = student.call(fn, ctrl, float(t), timeout=timeout)
+        return value
+    except StudentException as exc:
+        known = ("OverflowError", "ZeroDivisionError", "RecursionError")
+        if not hint or not any(k in str(exc) for k in known):
+            raise
+        trace = f"\n\n{exc.traceback}" if getattr(exc, "traceback", "") else ""
+        raise CheckFailure(f"{exc} ({call_text(fn, ctrl, t)}). {hint}{trace}") from None
+    except CallTimeout:
+        raise CheckFailure(
+            f"{call_text(fn, ctrl, t)} did not return within the time limit (degree "
+            f"{len(ctrl) - 1}). {TIMEOUT_HINTS.get(fn, '')}".rstrip()) from None
+
+
+# ---------------------------------------------------------------------------
+# verdicts that collect broken conventions
+# ---------------------------------------------------------------------------
+
+@dataclass
+class Verdict:
+    """Conventions broken so far in one check: key -> the first message about it."""
+
+    issues: dict[str, str] = field(default_factory=dict)
+
+    def note(self, key: str, message: str) -> None:
+        self.issues.setdefault(key, message)
+
+    def finish(self, credit: Any) -> None:
+        """Pass, or end the check with the product of the fractions and every message."""
+        if self.issues:
+            fraction = float(np.prod([FRACTIONS[k] for k in self.issues]))
+            credit.partial(fraction, " ".join(self.issues.values()))
+
+
+# ---------------------------------------------------------------------------
+# a point on the curve
+# ---------------------------------------------------------------------------
+
+def _levels_shape_ok(item: Any, rows: int, d: int, point_ok: bool) -> bool:
+    try:
+        arr = np.asarray(item, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return arr.shape == (rows, d) or (point_ok and arr.shape == (d,))
+
+
+def _is_triangle(got: Any, n: int, d: int) -> bool:
+    """Whether ``got`` is the list of levels [(n+1, d), (n, d), ..., (1, d)].
+
+    The last level may also be a bare point (d,), except at degree 0, where
+    ``[[x, y]]`` is one point written as a row rather than a list of levels.
+    """
+    if not isinstance(got, (list, tuple)) or len(got) != n + 1:
+        return False
+    if not all(isinstance(item, (list, tuple, np.ndarray)) for item in got):
+        return False
+    return all(_levels_shape_ok(item, n + 1 - r, d, point_ok=(r == n and n > 0))
+               for r, item in enumerate(got))
+
+
+def as_point(got: Any, *, fn: str, call: str, n: int, d: int,
+             verdict: Verdict) -> tuple[np.ndarray, str]:
+    """The answer as a float point of shape (d,); notes a shape convention broken.
+
+    Returns the point and a note to append to a value message ("" or where the
+    point was taken from).
+    """
+    if _is_triangle(got, n, d):
+        arrays = f"{n + 1} array{'s' if n else ''}"
+        verdict.note("levels", (
+            f"{fn} should return the point on the curve, shape ({d},); you returned the whole "
+            f"triangle of levels (a list of {arrays}). Return only the single point of the "
+            "last level."))
+        return np.asarray(got[-1], dtype=float).reshape(d), " (the last level you returned)"
+    if isinstance(got, (list, tuple)) and got and all(isinstance(g, np.ndarray) for g in got) \
+            and len({np.shape(g) for g in got}) > 1:
+        raise CheckFailure(
+            f"{call} should return one point, an array of shape ({d},); got a list of "
+            f"{len(got)} arrays of shapes {', '.join(str(np.shape(g)) for g in got[:4])}"
+            f"{', ...' if len(got) > 4 else ''}.")
+    arr = expect_array(got, dtype_kind="iuf", name=call)
+    if arr.shape == (1, d):
+        where = ("the single point of the last level, not the level itself"
+                 if fn == "de_casteljau" else "for example row 0 of what you return now")
+        verdict.note("row", (
+            f"{fn} should return a point of shape ({d},), not (1, {d}): the values are right, "
+            f"but drop the extra dimension ({where})."))
+        arr = arr[0]
+    elif arr.shape != (d,):
+        extra = ""
+        if arr.ndim == 2 and arr.shape[1] == d and arr.shape[0] > 1:
+            extra = (f" That is {arr.shape[0]} points; the curve at one t is a single point "
+                     f"with {d} coordinates.")
+        elif arr.ndim == 0:
+            extra = f" The curve is in {d}-D, so each point has {d} coordinates."
+        raise CheckFailure(f"{call} should return one point, an array of shape ({d},); "
+                           f"got {describe(got)}.{extra}")
+    return arr.astype(float), ""
+
+
+def judge_point(got: Any, expected: np.ndarray, *, fn: str, ctrl: np.ndarray, t: float,
+                atol: float, verdict: Verdict, hint: str = "") -> None:
+    """A point within ``atol`` (max-norm) of ``expected``; raise CheckFailure otherwise."""
+    n, d = len(ctrl) - 1, ctrl.shape[1]
+    call = call_text(fn, ctrl, t)
+    point, where = as_point(got, fn=fn, call=call, n=n, d=d, verdict=verdict)
+    if not np.all(np.isfinite(point)):
+        raise CheckFailure(f"{call} returned {show_point(point)}{where}, which is not finite. "
+                           f"{hint}".rstrip())
+    err = float(np.max(np.abs(point - expected)))
+    if err > atol:
+        note = weight_sum_note(point, ctrl[0]) if np.all(ctrl == ctrl[0]) else ""
+        raise CheckFailure(
+            f"{call} should be {show_point(expected, DIGITS)}; got {show_point(point, DIGITS)}"
+            f"{where} (off by {err:.2e}, allowed {atol:.1e}).{_endpoint_note(t, ctrl)}{note} "
+            f"{hint}".rstrip())
+
+
+def _endpoint_note(t: float, ctrl: np.ndarray) -> str:
+    if t == 0.0:
+        return " A Bezier curve starts at its first control point."
+    if t == 1.0:
+        return " A Bezier curve ends at its last control point."
+    return ""
+
+
+def weight_sum_note(got: Any, point: np.ndarray) -> str:
+    """For a polygon of equal points: by what factor the answer scales the point, if it does."""
+    try:
+        arr = np.asarray(got, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return ""
+    if arr.shape != point.shape or not np.all(np.isfinite(arr)):
+        return ""
+    if np.any(point == 0.0):
+        return ""
+    ratios = arr / point
+    if np.ptp(ratios) < 1e-9 * max(1.0, float(np.max(np.abs(ratios)))) \
+            and abs(float(ratios[0]) - 1.0) > 1e-9:
+        return f" Your result is {float(ratios[0]):.6g} times that point: your weights sum to " \
+               f"{float(ratios[0]):.6g}."
+    return ""
+
+
+def judge_endpoint(got: Any, ctrl: np.ndarray, t: float, *, fn: str, atol: float,
+                   verdict: Verdict) -> None:
+    """At t = 0 (t = 1) the answer must be ctrl[0] (ctrl[-1]) exactly."""
+    n, d = len(ctrl) - 1, ctrl.shape[1]
+    which, expected = ("first", ctrl[0]) if t == 0.0 else ("last", ctrl[-1])
+    call = call_text(fn, ctrl, t)
+    point, where = as_point(got, fn=fn, call=call, n=n, d=d, verdict=verdict)
+    if np.array_equal(point, expected):
+        return
+    err = float(np.max(np.abs(point - expected)))
+    message = (f"{fn}(ctrl, {show_number(t)}) must be the {which} control point exactly: "
+               f"with ctrl = {show_polygon(ctrl)} expected {show_point(expected)}, got "
+               f"{show_point(point)}{where}")
+    if err <= atol:
+        verdict.note("inexact-end", f"{message} (off by {err:.1e}: rounding). "
+                                    f"{EXACT_HINTS.get(fn, '')}".rstrip())
+        return
+    raise CheckFailure(f"{message}. A Bezier curve starts at its first control point and ends "
+                       "at its last one, because there all Bernstein weights but one are 0.")
+
+
+# ---------------------------------------------------------------------------
+# the two control polygons of a split
+# ---------------------------------------------------------------------------
+
+def curve_points(ctrl: np.ndarray, s: Any) -> np.ndarray:
+    """Points of the Bezier curve of ``ctrl`` at ``s`` (scalar -> (d,), array -> (m, d))."""
+    ctrl = np.asarray(ctrl, dtype=float)
+    return BPoly(ctrl[:, None, :], [0.0, 1.0])(s)
+
+
+def as_polygons(got: Any, *, call: str, n: int, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """The answer as two float arrays of shape (n + 1, d), or a CheckFailure saying why not."""
+    pair = isinstance(got, (list, tuple)) and len(got) == 2
+    stacked = isinstance(got, np.ndarray) and got.ndim == 3 and got.shape[0] == 2
+    if not (pair or stacked):
+        raise CheckFailure(f"{call} should return two control polygons, a tuple (left, right); "
+                           f"got {describe(got)}.")
+    out = []
+    for side, item in zip(("left", "right"), got):
+        name = f"the {side} polygon of {call}"
+        arr = expect_array(item, dtype_kind="iuf", name=name)
+        if arr.shape != (n + 1, d):
+            extra = (f" Each piece is a Bezier curve of the same degree {n}, so it has "
+                     f"{n + 1} control points with {d} coordinates each.")
+            raise CheckFailure(f"{_sentence(name)} should have shape ({n + 1}, {d}); got "
+                               f"shape {arr.shape}.{extra}")
+        arr = arr.astype(float)
+        if not np.all(np.isfinite(arr)):
+            raise CheckFailure(f"{_sentence(name)} holds values that are not finite.")
+        out.append(arr)
+    return out[0], out[1]
+
+
+def judge_split(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: float,
+                expected: tuple[np.ndarray, np.ndarray], *, atol: float,
+                verdict: Verdict) -> None:
+    """Right polygons pass; swapped or reversed ones are noted; anything else fails."""
+    want_left, want_right = expected
+
+    def close(a: np.ndarray, b: np.ndarray) -> bool:
+        return bool(np.max(np.abs(a - b)) <= atol)
+
+    call = call_text("split_bezier", ctrl, t)
+    for swapped in (False, True):
+        a, b = (right, left) if swapped else (left, right)
+        if not ((close(a, want_left) or close(a[::-1], want_left))
+                and (close(b, want_right) or close(b[::-1], want_right))):
+            continue
+        if swapped:
+            verdict.note("swapped", (
+                f"{call} returned (right, left): return the piece from ctrl[0] to the cut "
+                "point first, then the piece from the cut point to ctrl[-1]."))
+        backwards = [side for side, got, want in (("left", a, want_left),
+                                                  ("right", b, want_right))
+                     if not close(got, want)]
+        if backwards:
+            verdict.note("reversed", _reversed_message(backwards, call))
+        return
+    raise CheckFailure(split_failure(left, right, ctrl, t, expected, call=call, atol=atol))
+
+
+def _reversed_message(sides: Sequence[str], call: str) -> str:
+    which = " and ".join(f"{s} polygon" for s in sides)
+    verb = "is" if len(sides) == 1 else "are"
+    return (f"The {which} of {call} {verb} reversed: the right control points, listed "
+            "backwards. Each piece runs in the direction of the curve: left goes from ctrl[0] "
+            "(left[0]) to the cut point C(t) (left[-1]), and right from C(t) (right[0]) to "
+            "ctrl[-1] (right[-1]), so that left(s) = C(t s) and right(s) = C(t + (1 - t) s).")
+
+
+def split_failure(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: float,
+                  expected: tuple[np.ndarray, np.ndarray], *, call: str, atol: float) -> str:
+    """The first thing wrong with two polygons of the right shape, in the order one checks."""
+    def off(a: Any, b: Any) -> bool:
+        return bool(np.max(np.abs(np.asarray(a) - np.asarray(b))) > atol)
+
+    cut = expected[0][-1]
+    if off(left[0], ctrl[0]):
+        return (f"{call}: left[0] should be the first control point {show_point(ctrl[0])}, "
+                f"since the left piece starts where the curve starts; got "
+                f"{show_point(left[0])}. {SPLIT_HINT}")
+    if off(right[-1], ctrl[-1]):
+        return (f"{call}: right[-1] should be the last control point {show_point(ctrl[-1])}, "
+                f"since the right piece ends where the curve ends; got "
+                f"{show_point(right[-1])}. {SPLIT_HINT}")
+    if off(left[-1], cut) or off(right[0], cut):
+        return (f"{call}: left[-1] and right[0] should both be the cut point "
+                f"C({show_number(t)}) = {show_point(cut)}, where the two pieces meet; got "
+                f"left[-1] = {show_point(left[-1])} and right[0] = {show_point(right[0])}. "
+                f"{SPLIT_HINT}")
+    samples = np.linspace(0.0, 1.0, 11)
+    for side, poly, where in (("left", left, t * samples),
+                              ("right", right, t + (1.0 - t) * samples)):
+        mine, theirs = curve_points(poly, samples), curve_points(ctrl, where)
+        bad = np.flatnonzero(np.max(np.abs(mine - theirs), axis=1) > atol)
+        if bad.size:
+            k = int(bad[0])
+            formula = "t s" if side == "left" else "t + (1 - t) s"
+            return (f"{call}: the {side} polygon does not trace its piece of the curve. At "
+                    f"s = {show_number(samples[k])} its Bezier curve is at "
+                    f"{show_point(mine[k])}, but C({formula}) = C({where[k]:.6g}) = "
+                    f"{show_point(theirs[k])}. {SPLIT_HINT}")
+    for side, poly, want in (("left", left, expected[0]), ("right", right, expected[1])):
+        if off(poly, want):
+            row = int(np.argmax(np.max(np.abs(poly - want), axis=1)))
+            return (f"{call}: {side}[{row}] should be {show_point(want[row])}; got "
+                    f"{show_point(poly[row])}. {SPLIT_HINT}")
+    return f"{call} is off by more than {atol:.1e}. {SPLIT_HINT}"
+
+
+def split_picture(ctrl: np.ndarray, t: float, left: np.ndarray, right: np.ndarray) -> bytes:
+    """PNG: the curve, its control polygon, and the student's two polygons (x-y plane)."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5.5, 4.2))
+    ax = fig.add_subplot()
+    curve = curve_points(ctrl, np.linspace(0.0, 1.0, 200))
+    ax.plot(curve[:, 0], curve[:, 1], color="0.2", lw=2, label="the curve C")
+    ax.plot(ctrl[:, 0], ctrl[:, 1], "o--", color="0.6", label="its control polygon")
+    s = np.linspace(0.0, 1.0, 100)
+    for poly, colour, marker, side in ((left, "tab:blue", "s-", "left"),
+                                       (right, "tab:red", "^-", "right")):
+        ax.plot(poly[:, 0], poly[:, 1], marker, color=colour, label=f"your {side} polygon")
+        piece = curve_points(poly, s)
+        ax.plot(piece[:, 0], piece[:, 1], ":", color=colour, lw=1.5,
+                label=f"the curve of your {side} polygon")
+    cut = curve_points(ctrl, t)
+    ax.plot([cut[0]], [cut[1]], "k*", ms=14, label=f"C(t), t = {t:.4g}")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=7, loc="best")
+    ax.set_title("split_bezier: your two pieces")
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=90)
+    return buffer.getvalue()
+
+
+def grade_split(student: Any, ctrl: np.ndarray, t: float,
+                expected: tuple[np.ndarray, np.ndarray], *, atol: float, verdict: Verdict,
+                picture: Callable[[str, bytes], None] | None = None) -> None:
+    """Call ``split_bezier``, judge the answer, attach a picture when it is not right."""
+    n, d = len(ctrl) - 1, ctrl.shape[1]
+    got = ask(student, "split_bezier", ctrl, t)
+    left, right = as_polygons(got, call=call_text("split_bezier", ctrl, t), n=n, d=d)
+    before = len(verdict.issues)
+    try:
+        judge_split(left, right, ctrl, t, expected, atol=atol, verdict=verdict)
+    except CheckFailure:
+        if picture is not None and d >= 2:
+            picture(f"split at t = {t:.4g}", split_picture(ctrl, t, left, right))
+        raise
+    if picture is not None and d >= 2 and len(verdict.issues) > before:
+        picture(f"split at t = {t:.4g}", split_picture(ctrl, t, left, right))
