@@ -50,7 +50,7 @@ class GradingOptions:
 
 def policy_for(assignment: Assignment, options: GradingOptions) -> IsolationPolicy:
     """The options' policy with the assignment's limit overrides applied."""
-    overrides = dict(assignment.limits)
+    overrides: dict[str, Any] = dict(assignment.limits)
     if not overrides:
         return options.policy
     limits = replace(options.policy.limits, **overrides)
@@ -187,8 +187,13 @@ class Grader:
 
 
 def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> int:
-    """Run the check files in this (trusted) process with ``plugin``; no terminal output."""
-    args = [str(f) for f in files] + [
+    """Run the check files in this (trusted) process with ``plugin``; no terminal output.
+
+    ``rootdir/checks/public`` is on ``sys.path`` for the run, so public and hidden
+    checks import the helper modules released beside the public checks by name.
+    """
+    helpers = rootdir / "checks" / "public"
+    args = [str(f) for f in files] + ["-o", f"pythonpath={helpers}"] + [
         "-c", os.devnull, "--rootdir", str(rootdir), "-p", "no:cacheprovider",
         "-p", "no:terminal", "-p", "no:stepwise", "-p", "no:unraisableexception",
         "-p", "no:threadexception", "-p", "no:pastebin", "-p", "no:junitxml", "-p", "no:doctest",

@@ -22,7 +22,6 @@ Computer Aided Geometric Design 29(6), 379-419, 2012. doi:10.1016/j.cagd.2012.03
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -36,17 +35,7 @@ from reference.bezier import bezier as reference_bezier
 from reference.bezier import split as reference_split
 
 
-def _load_feedback():
-    """The feedback module shared with the public checks (loaded by path, any import mode)."""
-    path = Path(__file__).resolve().parents[1] / "public" / "bezier_feedback.py"
-    spec = importlib.util.spec_from_file_location("bezier_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # it defines a dataclass, which looks itself up there
-    spec.loader.exec_module(module)
-    return module
-
-
-fb = _load_feedback()
+import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run
 
 #: Low degree: any correct evaluation is within a few units of 1e-16 (relative); the
 #: smallest slip (a wrong exponent, t for 1 - t) is off by 1e-3 or more.

@@ -11,7 +11,6 @@ worked examples of the notebook are also written out by hand below.
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -19,17 +18,7 @@ import numpy as np
 import pytest
 
 
-def _load_feedback():
-    """The shared feedback module beside this file (works whatever pytest's import mode)."""
-    path = Path(__file__).with_name("bezier_feedback.py")
-    spec = importlib.util.spec_from_file_location("bezier_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # it defines a dataclass, which looks itself up there
-    spec.loader.exec_module(module)
-    return module
-
-
-fb = _load_feedback()
+import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run
 
 #: Allowed error, relative to the polygon's size (max |coordinate|, at least 1). Every
 #: correct evaluation of these low-degree curves (Bernstein or de Casteljau, any order of

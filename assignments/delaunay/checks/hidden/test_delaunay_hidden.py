@@ -26,7 +26,6 @@ doi:10.1007/PL00009321
 
 from __future__ import annotations
 
-import importlib.util
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,16 +39,7 @@ from reference.delaunay import _incircle_many, delaunay, incircle, is_delaunay
 from reference.geometry import _orient2d_many
 
 
-def _load_feedback():
-    """The feedback module shared with the public checks (loaded by path, any import mode)."""
-    path = Path(__file__).resolve().parents[1] / "public" / "delaunay_feedback.py"
-    spec = importlib.util.spec_from_file_location("delaunay_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-fb = _load_feedback()
+import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
 
 LAKE_CSV = Path(__file__).resolve().parents[2] / "data" / "lake.csv"
 #: a UTM-like origin (metres): large coordinates, small differences

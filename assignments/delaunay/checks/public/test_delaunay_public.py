@@ -9,23 +9,13 @@ to verify by hand, or (the lake) is stored beside this file.
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 
-def _load_feedback():
-    """The shared feedback module beside this file (works whatever pytest's import mode)."""
-    path = Path(__file__).with_name("delaunay_feedback.py")
-    spec = importlib.util.spec_from_file_location("delaunay_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-fb = _load_feedback()
+import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
 
 HERE = Path(__file__).resolve().parent
 LAKE_CSV = HERE.parents[1] / "data" / "lake.csv"

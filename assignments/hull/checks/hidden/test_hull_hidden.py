@@ -20,7 +20,6 @@ robustness problems in geometric computations", Computational Geometry 40(1),
 
 from __future__ import annotations
 
-import importlib.util
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -34,16 +33,7 @@ from reference.geometry import convex_hull as reference_hull
 from reference.geometry import orient2d
 
 
-def _load_feedback():
-    """The feedback module shared with the public checks (loaded by path, any import mode)."""
-    path = Path(__file__).resolve().parents[1] / "public" / "hull_feedback.py"
-    spec = importlib.util.spec_from_file_location("hull_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-feedback = _load_feedback()
+import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
 
 U = 2.0**-53  # the gap between neighbouring doubles in [0.5, 1)
 NEAR_COLLINEAR_HINT = ("These points are nearly collinear: a floating-point determinant can "

@@ -7,23 +7,13 @@ The answers here are small enough to verify by hand on squared paper.
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 
-def _load_feedback():
-    """The shared feedback module beside this file (works whatever pytest's import mode)."""
-    path = Path(__file__).with_name("hull_feedback.py")
-    spec = importlib.util.spec_from_file_location("hull_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-feedback = _load_feedback()
+import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
 
 PINS_CSV = Path(__file__).resolve().parents[2] / "data" / "pins.csv"
 

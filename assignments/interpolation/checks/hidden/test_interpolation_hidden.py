@@ -31,7 +31,6 @@ IMA Journal of Numerical Analysis 24(4), 547-556, 2004. doi:10.1093/imanum/24.4.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,16 +53,7 @@ from reference.interpolation import (
 )
 
 
-def _load_feedback():
-    """The feedback module shared with the public checks (loaded by path, any import mode)."""
-    path = Path(__file__).resolve().parents[1] / "public" / "interp_feedback.py"
-    spec = importlib.util.spec_from_file_location("interp_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-fb = _load_feedback()
+import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
 
 U = 2.0**-53
 SLACK = 10.0

@@ -12,7 +12,6 @@ code ``numpy.polynomial`` is not allowed.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -20,16 +19,7 @@ import numpy as np
 import pytest
 
 
-def _load_feedback():
-    """The shared feedback module beside this file (works whatever pytest's import mode)."""
-    path = Path(__file__).with_name("interp_feedback.py")
-    spec = importlib.util.spec_from_file_location("interp_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-fb = _load_feedback()
+import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
 
 
 def runge(x):

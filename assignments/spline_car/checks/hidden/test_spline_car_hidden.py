@@ -13,7 +13,6 @@ fixture: a regrade draws the same inputs, another submission draws others.
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 import math
 from dataclasses import dataclass
@@ -28,17 +27,7 @@ from reference.data import car
 from reference.splines import CubicSpline
 
 
-def _load_feedback():
-    """The feedback module shared with the public checks (loaded by path, any import mode)."""
-    path = Path(__file__).resolve().parents[1] / "public" / "spline_feedback.py"
-    spec = importlib.util.spec_from_file_location("spline_checks_feedback", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
-
-
-judge = _load_feedback()
+import spline_feedback as judge  # checks/public/spline_feedback.py: on sys.path while checks run
 
 
 def expected_rows(x: np.ndarray, y: np.ndarray) -> np.ndarray:
