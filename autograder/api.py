@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Callable, Sequence
 
+from autograder import exports
 from autograder.assignment import Assignment, load_assignment
-from autograder.batch import BatchReport, grade_batch
+from autograder.batch import BatchReport, error_result, grade_batch
 from autograder.grading import Grader, GradingOptions
 from autograder.release import release as _release
+from autograder.report import write_result
 from autograder.results import SubmissionResult
 
 
@@ -25,10 +28,57 @@ def release(assignment: str | Path | Assignment, *, out: Path) -> Path:
 def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, out: Path,
           jobs: int | None = None, options: GradingOptions | None = None,
           progress: bool | None = None,
-          on_result: Callable[[SubmissionResult], None] | None = None) -> BatchReport:
-    """Grade notebooks (files or folders) into ``out``; see :func:`autograder.batch.grade_batch`."""
-    return grade_batch(resolve_assignment(assignment), [Path(s) for s in submissions], Path(out),
-                       jobs=jobs, options=options, progress=progress, on_result=on_result)
+          on_result: Callable[[SubmissionResult], None] | None = None,
+          junit: Path | None = None) -> BatchReport:
+    """Grade notebooks (files or folders) into ``out``; see :func:`autograder.batch.grade_batch`.
+
+    ``junit``, when given, is a file for the JUnit XML report of the batch.
+    """
+    found = resolve_assignment(assignment)
+    report = grade_batch(found, [Path(s) for s in submissions], Path(out),
+                         jobs=jobs, options=options, progress=progress, on_result=on_result)
+    if junit is not None:
+        exports.write_junit(Path(junit), report.results, name=found.name)
+    return report
+
+
+def ci_report(report: BatchReport, *, step_summary: Path | None = None) -> list[str]:
+    """The lines a CI log needs (``Points X/Y`` per submission, for GitHub Classroom).
+
+    ``step_summary``, when given (GitHub's ``$GITHUB_STEP_SUMMARY``), gets a
+    Markdown report of the batch appended.
+    """
+    if step_summary is not None:
+        exports.append_step_summary(Path(step_summary), report.results)
+    return exports.ci_lines(report.results)
+
+
+def gradescope(assignment: str | Path | Assignment, *, out: Path) -> Path:
+    """Write the autograder zip Gradescope takes for ``assignment`` into ``out``; return its path."""
+    return exports.gradescope_zip(resolve_assignment(assignment), Path(out))
+
+
+def gradescope_run(root: str | Path = exports.GRADESCOPE_ROOT) -> int:
+    """Grade a submission the Gradescope way; what the zip's ``run_autograder`` calls.
+
+    Reads the notebook from ``root/submission/``, the assignment from
+    ``root/source/assignment/<name>/`` and writes ``root/results/results.json``
+    (pictures in ``root/results/images/``). A grader failure is written as an
+    "error" result, so Gradescope always gets a ``results.json``. Returns 0.
+    """
+    root = Path(root)
+    found = load_assignment(exports.bundled_assignment(root / "source"))
+    notebook, note = exports.pick_notebook(root / "submission", found.notebook.name)
+    out = root / "results"
+    with Grader(found) as grader:
+        try:
+            result = grader.grade(notebook, id=notebook.stem, out_dir=out)
+        except Exception as exc:  # the grader's own failure: Gradescope still gets a result
+            result = error_result(found, notebook, notebook.stem, exc)
+    if note:
+        result = dataclasses.replace(result, output=f"{note} {result.output}")
+    write_result(out, result)
+    return 0
 
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,

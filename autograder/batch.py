@@ -23,9 +23,11 @@ from tqdm import tqdm
 
 from autograder.assignment import Assignment, load_assignment
 from autograder.errors import UsageError
+from autograder.feedback import FEEDBACK_NAME, write_feedback
 from autograder.grading import Grader, GradingOptions, submission_key, _file_sha256
-from autograder.report import read_result, write_grades, write_result
+from autograder.report import RESULTS_NAME, read_result, write_grades, write_result
 from autograder.results import SubmissionResult
+from autograder.summary import write_summary
 
 
 @dataclass(frozen=True)
@@ -112,14 +114,30 @@ def _init_slot(assignment_root: str, options: GradingOptions, counter: Any) -> N
 
 
 def grade_one(grader: Grader, path: Path, sub_id: str, out_dir: Path) -> SubmissionResult:
-    """Grade one file into ``out_dir/<id>/``; a grader failure becomes an "error" result."""
+    """Grade one file into ``out_dir/<id>/``; a grader failure becomes an "error" result.
+
+    ``results.json`` is written first, then ``feedback.html`` beside it, whatever
+    the outcome.
+    """
     folder = out_dir / sub_id
     try:
-        return grader.grade(path, id=sub_id, out_dir=folder)
+        result = grader.grade(path, id=sub_id, out_dir=folder)
     except Exception as exc:  # the grader's own failure: record it, never lose the file
         result = error_result(grader.assignment, path, sub_id, exc)
         write_result(folder, result)
-        return result
+    write_feedback(folder, result, title=grader.assignment.title)
+    return result
+
+
+def refresh_feedback(folder: Path, result: SubmissionResult, title: str) -> None:
+    """Write ``feedback.html`` for a reused result when it is missing or older than its result."""
+    page, data = folder / FEEDBACK_NAME, folder / RESULTS_NAME
+    try:
+        fresh = page.stat().st_mtime_ns >= data.stat().st_mtime_ns
+    except OSError:
+        fresh = False
+    if not fresh:
+        write_feedback(folder, result, title=title)
 
 
 def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
@@ -140,7 +158,12 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
                 jobs: int | None = None, options: GradingOptions | None = None,
                 progress: bool | None = None,
                 on_result: Callable[[SubmissionResult], None] | None = None) -> BatchReport:
-    """Grade every submission into ``out_dir``, reusing results whose key is unchanged."""
+    """Grade every submission into ``out_dir``, reusing results whose key is unchanged.
+
+    Writes ``<id>/results.json`` and ``<id>/feedback.html`` as each submission
+    finishes, then ``grades.csv``, ``summary.json`` and ``summary.html`` from
+    every result (reused ones included).
+    """
     import time
 
     start = time.perf_counter()
@@ -155,6 +178,7 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
         key = submission_key(_file_sha256(path), assignment, options)
         if previous is not None and previous.key == key and previous.outcome != "error":
             done[ids[path]] = previous
+            refresh_feedback(out_dir / ids[path], previous, assignment.title)
         else:
             todo.append(path)
     reused = len(done)
@@ -177,6 +201,7 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
     bar.close()
     results = tuple(done[ids[p]] for p in paths)
     write_grades(out_dir, results)
+    write_summary(out_dir, results, title=assignment.title, assignment=assignment.name)
     return BatchReport(results=results, graded=len(todo), reused=reused,
                        seconds=time.perf_counter() - start)
 
@@ -204,6 +229,7 @@ def _run_pool(assignment: Assignment, options: GradingOptions, jobs: int,
                     if attempts[sub_id] >= 2:
                         result = error_result(assignment, path, sub_id, exc)
                         write_result(out_dir / sub_id, result)
+                        write_feedback(out_dir / sub_id, result, title=assignment.title)
                         finished(result)
                     else:
                         broken.append((path, sub_id))

@@ -52,6 +52,16 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"submissions graded in parallel (default: number of cores, {os.cpu_count()})")
     _timing_options(grd)
     grd.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    grd.add_argument("--junit", type=Path, default=None, metavar="FILE",
+                     help="also write a JUnit XML report (one testsuite per submission) to FILE")
+    grd.add_argument("--ci", action="store_true",
+                     help="for CI runs: print a 'Points X/Y' line per submission (GitHub Classroom), "
+                          "append a Markdown report to $GITHUB_STEP_SUMMARY when set, no progress bar; "
+                          "the exit status is non-zero only when grading itself failed")
+
+    gsc = commands.add_parser("gradescope", help="write the autograder zip for Gradescope")
+    gsc.add_argument("assignment", help="a folder name under assignments/ or a path to one")
+    gsc.add_argument("--out", type=Path, required=True, help="folder to write <name>-gradescope.zip to")
 
     chk = commands.add_parser("check", help="run the public checks on your notebook before submitting")
     chk.add_argument("notebook", type=Path, help="your notebook")
@@ -73,8 +83,14 @@ def _options(args: argparse.Namespace) -> GradingOptions:
 
 
 def _grade(args: argparse.Namespace) -> int:
+    quiet = args.no_progress or args.ci
     report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
-                       options=_options(args), progress=False if args.no_progress else None)
+                       options=_options(args), progress=False if quiet else None,
+                       junit=args.junit)
+    if args.ci:
+        summary_file = os.environ.get("GITHUB_STEP_SUMMARY") or None
+        for line in api.ci_report(report, step_summary=Path(summary_file) if summary_file else None):
+            print(line)
     results = report.results
     scores = [r.score / r.max_score for r in results if r.max_score]
     mean = 100 * sum(scores) / len(scores) if scores else 0.0
@@ -85,6 +101,9 @@ def _grade(args: argparse.Namespace) -> int:
           f"in {report.seconds:.1f} s; mean score {mean:.1f}%.")
     print("Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     print(f"Results: {args.out / 'grades.csv'} and {args.out}/<id>/results.json")
+    print(f"Feedback: {args.out}/<id>/feedback.html; class summary: {args.out / 'summary.html'}")
+    if args.junit is not None:
+        print(f"JUnit XML: {args.junit}")
     for failed in report.failed:
         print(f"error: the grader failed on {failed.source}: {failed.output}", file=sys.stderr)
     return 1 if report.failed else 0
@@ -117,10 +136,16 @@ def _release(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gradescope(args: argparse.Namespace) -> int:
+    path = api.gradescope(args.assignment, out=args.out)
+    print(f"Wrote {path}: upload it as the autograder in the Gradescope assignment's settings.")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    handlers = {"release": _release, "grade": _grade, "check": _check}
+    handlers = {"release": _release, "grade": _grade, "check": _check, "gradescope": _gradescope}
     try:
         return handlers[args.command](args)
     except UsageError as exc:

@@ -163,11 +163,11 @@ class GradingPlugin:
         exc = call.excinfo.value if call.excinfo is not None else None
         if call.when == "call" or (call.when == "setup" and exc is not None):
             self._record(item, exc)
-        outcome = "passed" if exc is None else "failed"
-        return pytest.TestReport(item.nodeid, item.location, {}, outcome,
+        when = "setup" if call.when == "collect" else call.when
+        return pytest.TestReport(item.nodeid, item.location, {},
+                                 "passed" if exc is None else "failed",
                                  None if exc is None else "recorded by the grading plugin",
-                                 call.when, duration=call.duration, start=call.start,
-                                 stop=call.stop)
+                                 when, duration=call.duration, start=call.start, stop=call.stop)
 
     def _record(self, item: pytest.Item, exc: BaseException | None) -> None:
         name, dataset = check_name(item)

@@ -65,8 +65,8 @@ def _reap(signum: int, frame: Any) -> None:
 
 def _policy(spec: dict[str, Any]) -> sandbox.IsolationPolicy:
     limits = sandbox.Limits(**spec.get("limits", {}))
-    rest = {k: (tuple(v) if isinstance(v, list) else v)
-            for k, v in spec.items() if k != "limits"}
+    rest: dict[str, Any] = {k: (tuple(v) if isinstance(v, list) else v)
+                            for k, v in spec.items() if k != "limits"}
     return sandbox.IsolationPolicy(limits=limits, **rest)
 
 
@@ -85,7 +85,7 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         protocol.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
         run.run([(int(i), str(s)) for i, s in request["cells"]],
-                lambda i: protocol.send_message(sock, {"op": "cell", "index": i}))
+                lambda i: _announce(sock, i))
         protocol.send_message(sock, {
             "op": "ready",
             "cells": [o.to_wire() for o in run.outcomes],
@@ -97,6 +97,11 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         code = 70
     finally:
         os._exit(code)
+
+
+def _announce(sock: socket.socket, index: int) -> None:
+    """Tell the grader which cell starts now (so a hang is pinned to its cell)."""
+    protocol.send_message(sock, {"op": "cell", "index": index})
 
 
 def _quiet_standard_streams() -> None:
