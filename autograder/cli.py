@@ -10,6 +10,7 @@ from typing import Sequence
 
 from autograder import api
 from autograder.errors import AutograderError, UsageError
+from autograder.sandbox import probe_support
 from autograder.grading import GradingOptions
 from autograder.results import SubmissionResult
 
@@ -142,10 +143,18 @@ def _gradescope(args: argparse.Namespace) -> int:
     return 0
 
 
+def _say_missing_protections() -> None:
+    """Say once, before grading, which protections this machine cannot give."""
+    for note in probe_support().notes:
+        print(f"autograder: note: {note}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     handlers = {"release": _release, "grade": _grade, "check": _check, "gradescope": _gradescope}
+    if args.command in ("grade", "check"):
+        _say_missing_protections()
     try:
         return handlers[args.command](args)
     except UsageError as exc:
