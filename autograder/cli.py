@@ -52,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
     grd.add_argument("--jobs", type=_positive_int, default=None,
                      help=f"submissions graded in parallel (default: number of cores, {os.cpu_count()})")
     _timing_options(grd)
+    grd.add_argument("--public-only", action="store_true",
+                     help="run only the public checks (what students see with `autograder check`)")
     grd.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     grd.add_argument("--junit", type=Path, default=None, metavar="FILE",
                      help="also write a JUnit XML report (one testsuite per submission) to FILE")
@@ -80,7 +82,8 @@ def _timing_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _options(args: argparse.Namespace) -> GradingOptions:
-    return GradingOptions(notebook_timeout=args.timeout, call_timeout=args.call_timeout)
+    return GradingOptions(notebook_timeout=args.timeout, call_timeout=args.call_timeout,
+                          public_only=getattr(args, "public_only", False))
 
 
 def _grade(args: argparse.Namespace) -> int:

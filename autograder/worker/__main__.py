@@ -140,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     _die_with_parent()
     control = socket.socket(fileno=args.control_fd)
     shell = execute.make_shell()
+    execute.warm_up(shell)
     figures.close_all()
     signal.signal(signal.SIGCHLD, _reap)
     protocol.send_message(control, {"op": "hello", "pid": os.getpid(),

@@ -79,9 +79,35 @@ def make_shell() -> GradingShell:
     config.InteractiveShell.colors = "NoColor"
     config.InteractiveShell.autoindent = False
     shell = GradingShell.instance(config=config)
+    shell.InteractiveTB.set_mode(mode="Plain")  # a standard traceback, quick to format
     warnings.filterwarnings("ignore", message=".*non-interactive.*cannot be shown")
     warnings.filterwarnings("ignore", message=".*FigureCanvasAgg is non-interactive.*")
     return shell
+
+
+def warm_up(shell: GradingShell) -> None:
+    """Pay first-use costs once, in the warm parent, instead of in every child.
+
+    matplotlib builds fonts, colour maps and the mathtext parser on first use, and
+    IPython imports its traceback machinery on the first error: together tens of
+    milliseconds that every forked child would otherwise pay again.
+    """
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots()
+    ax.plot([0.0, 1.0], [0.0, 1.0], "o-", label="$x$")
+    ax.imshow(np.zeros((2, 2)), cmap="coolwarm")
+    ax.scatter([0.5], [0.5])
+    ax.set_title("$p_x = 0.5$")
+    ax.legend()
+    fig.savefig(io.BytesIO(), format="png", dpi=72)
+    plt.close("all")
+    try:
+        raise ValueError("warm-up")
+    except ValueError:
+        shell.showtraceback()
+    shell.last_traceback = ""
 
 
 @dataclass
