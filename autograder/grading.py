@@ -140,7 +140,7 @@ class Grader:
         session = StudentSession(
             slot=self._slot, cells=cells, data_files=self._data_files(), policy=self.policy,
             notebook_timeout=self.options.notebook_timeout or self.assignment.notebook_timeout,
-            exclude=self._excluded_paths())
+            exclude=self._excluded_paths(out_dir))
         try:
             run = session.start()
             tests, log = self._run_checks(session, run.functions, forbidden, seed, out_dir)
@@ -177,8 +177,11 @@ class Grader:
         root = self.assignment.root
         return [(p, str(p.relative_to(root))) for p in self.assignment.data_files]
 
-    def _excluded_paths(self) -> list[Path]:
+    def _excluded_paths(self, out_dir: Path | None = None) -> list[Path]:
+        """Trees the worker must never read: the assignment, the grader, other results."""
         roots = {self.assignment.root.resolve(), self.assignment.root.resolve().parent}
+        if out_dir is not None:  # the batch's result folder: every student's results
+            roots.add(out_dir.resolve().parent)
         package = Path(autograder.__file__).resolve().parent
         roots.add(package)
         if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
