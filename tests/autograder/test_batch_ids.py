@@ -55,3 +55,17 @@ def test_results_round_trip_in_gradescope_format(tmp_path: Path) -> None:
     assert data["tests"][1] == {**data["tests"][1], "status": "failed", "visibility": "visible"}
     assert read_result(tmp_path / "alice") == result
     assert not list((tmp_path / "alice").glob(".*.tmp"))
+
+
+def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    from autograder import cli
+    from autograder.sandbox import IsolationSupport
+
+    note = "Landlock is not available (kernel ABI 0): file and network restrictions are off."
+    monkeypatch.setattr(cli, "probe_support",
+                        lambda: IsolationSupport(landlock_abi=0, is_root=True,
+                                                 can_unshare_net=True, notes=(note,)))
+    monkeypatch.setattr(cli, "_check", lambda args: 0)
+    assert cli.main(["check", "x.ipynb"]) == 0
+    assert capsys.readouterr().err.count(note) == 1
