@@ -27,6 +27,7 @@ from autograder.errors import (
     AutograderError,
     CallTimeout,
     MissingFunction,
+    StudentError,
     StudentException,
     UnsupportedValue,
     WorkerCrashed,
@@ -35,8 +36,12 @@ from autograder.sandbox import IsolationPolicy
 
 #: how long the warm parent may take to import numpy, scipy and matplotlib
 STARTUP_TIMEOUT = 120.0
-#: how many times a submission's worker is restarted after a call timed out
+#: how many cells that hang or kill the worker are skipped before giving up on a notebook
 MAX_RESTARTS = 2
+#: how many times a submission's worker is restarted after a call hung or killed it
+MAX_CALL_RESTARTS = 8
+#: after this many hangs or crashes, a function is not called again for this submission
+MAX_STRIKES = 2
 
 
 @dataclass(frozen=True)
@@ -226,6 +231,8 @@ class StudentSession:
     exclude: Sequence[Path] = ()
     restarts: int = 0
     skip: dict[int, str] = field(default_factory=dict)
+    #: per function: how often a call hung or ended the worker, and the last such error
+    strikes: dict[str, tuple[int, StudentError]] = field(default_factory=dict)
     _pid: int | None = None
     _sock: socket.socket | None = None
     _workdir: Path | None = None
@@ -330,7 +337,7 @@ class StudentSession:
     def request(self, message: dict[str, Any], *, timeout: float, what: str) -> dict[str, Any]:
         """Send ``message`` and return the answer, or raise a :class:`StudentError`."""
         if self._sock is None:
-            if self.report is None or self.report.crashed or self.restarts >= MAX_RESTARTS:
+            if self.report is None or self.report.crashed or self.restarts >= MAX_CALL_RESTARTS:
                 raise WorkerCrashed(
                     f"{what} could not run: your notebook's worker stopped earlier "
                     "(a time limit, a memory limit, or code that ended the process).")
@@ -367,9 +374,19 @@ class StudentSession:
              timeout: float, figures: bool = False) -> tuple[Any, list[Any]]:
         """Call the student's ``name(*args, **kwargs)``; return (value, figures)."""
         what = f"{name}()"
-        answer = self.request({"op": "call", "name": name, "args": list(args),
-                               "kwargs": kwargs, "figures": figures},
-                              timeout=timeout, what=what)
+        count, earlier = self.strikes.get(name, (0, None))
+        if earlier is not None and count >= MAX_STRIKES:
+            # A function that hung (or crashed) twice would cost a full time limit and a
+            # restart on every remaining check, starving the other functions' checks.
+            raise type(earlier)(f"{earlier} (it did so {count} times, so it was not "
+                                "called again)")
+        try:
+            answer = self.request({"op": "call", "name": name, "args": list(args),
+                                   "kwargs": kwargs, "figures": figures},
+                                  timeout=timeout, what=what)
+        except (CallTimeout, WorkerCrashed) as exc:
+            self.strikes[name] = (count + 1, exc)
+            raise
         if not answer.get("ok"):
             raise _answer_error(name, answer)
         value = answer.get("value")

@@ -80,6 +80,8 @@ def nb(*sources: str, kernel: str = "python3", language: str = "python") -> nbfo
     book.metadata["language_info"] = {"name": language}
     book.cells = [new_markdown_cell("A submission used by the grader's tests.")]
     book.cells += [new_code_cell(s.strip("\n")) for s in sources]
+    for number, cell in enumerate(book.cells):
+        cell.id = f"cell-{number}"  # stable ids: rerunning this script changes nothing
     return book
 
 
@@ -97,7 +99,7 @@ PROBLEMS: dict[str, tuple[object, dict[str, object]]] = {
     "infinite-loop": (nb("while True:\n    pass", SOLUTION),
                       {"score": "1", "outcome": "timeout", "contains": ["time limit"]}),
     "loop-when-called": (nb(SOLUTION, "def convex_hull(points):\n    while True:\n        pass"),
-                         {"score": "partial", "outcome": "graded", "contains": ["did not return within"]}),
+                         {"score": "partial", "outcome": "graded", "contains": ["did not return within", "not called again"]}),
     "exits": (nb("import sys\nsys.exit(3)", "exit()", SOLUTION), {"score": "1", "outcome": "graded"}),
     "hard-exit": (nb("import os\nos._exit(1)", SOLUTION), {"score": "1", "outcome": "crashed"}),
     "exit-when-called": (nb(SOLUTION, "import os\ndef convex_hull(points):\n    os._exit(0)"),
