@@ -251,8 +251,9 @@ def summarise_run(run: RunReport, notebook: Notebook) -> str:
         parts.append(f"Cell {index + 1} did not finish within the time limit and was skipped; "
                      "the cells after it ran without it.")
     for index in run.crashed_cells:
-        parts.append(f"Cell {index + 1} ended the worker process (it exited, or hit a memory or "
-                     "CPU limit) and was skipped; the cells after it ran without it.")
+        parts.append(f"Cell {index + 1} stopped the worker (it exited, hit a memory or CPU limit, "
+                     "or broke its connection to the grader) and was skipped; the cells after it "
+                     "ran without it.")
     errors = [c for c in run.cells if not c.ok]
     if errors:
         listed = "; ".join(f"cell {c.index + 1} ({c.ename}: {c.evalue[:120]})" for c in errors[:5])

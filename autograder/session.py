@@ -97,6 +97,14 @@ def claim_slot(first: int = 0) -> tuple[int, int]:
                           "is another grader stuck?")
 
 
+def _cell_report(data: Any) -> CellReport:
+    """A :class:`CellReport` from the worker's plain data, every field checked."""
+    return CellReport(index=int(data["index"]), ok=bool(data["ok"]),
+                      seconds=float(data["seconds"]), ename=str(data.get("ename", ""))[:200],
+                      evalue=str(data.get("evalue", ""))[:2000],
+                      traceback=str(data.get("traceback", ""))[:20_000])
+
+
 class WorkerSlot:
     """One warm parent process; forks a sandboxed child per submission."""
 
@@ -243,7 +251,7 @@ class StudentSession:
         """Run the notebook; a cell that hangs or kills the worker is skipped and the rest re-run."""
         begin = time.perf_counter()
         notes: list[str] = []
-        cells: list[dict[str, Any]] = []
+        cells: list[CellReport] = []
         stdout, functions = "", []
         while True:
             status, cell, payload = self._run_once(notes)
@@ -258,7 +266,7 @@ class StudentSession:
                 break
             self.skip[cell] = status
         self.report = RunReport(
-            cells=tuple(CellReport(**c) for c in cells), stdout=stdout,
+            cells=tuple(cells), stdout=stdout,
             functions=tuple(functions), seconds=time.perf_counter() - begin,
             timed_out_cells=tuple(sorted(i for i, s in self.skip.items() if s == "timeout")),
             crashed_cells=tuple(sorted(i for i, s in self.skip.items() if s == "crash")),
@@ -281,13 +289,18 @@ class StudentSession:
                 return "crash", current, None
             if not isinstance(message, dict):
                 continue
-            if message.get("op") == "started":
-                notes[:] = [str(n) for n in message.get("notes", [])]
-            elif message.get("op") == "cell":
-                current = int(message["index"])
-            elif message.get("op") == "ready":
-                return "ready", None, (list(message["cells"]), str(message.get("stdout", "")),
-                                       [str(f) for f in message.get("functions", [])])
+            try:  # the child is untrusted: a malformed message counts as a crash
+                if message.get("op") == "started":
+                    notes[:] = [str(n) for n in message.get("notes", [])]
+                elif message.get("op") == "cell":
+                    current = int(message["index"])
+                elif message.get("op") == "ready":
+                    return "ready", None, ([_cell_report(c) for c in message["cells"]],
+                                           str(message.get("stdout", "")),
+                                           [str(f) for f in message.get("functions", [])])
+            except (KeyError, TypeError, ValueError):
+                self._kill()
+                return "crash", current, None
 
     def _spawn(self) -> None:
         self._kill()

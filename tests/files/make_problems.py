@@ -145,6 +145,14 @@ PROBLEMS: dict[str, tuple[object, dict[str, object]]] = {
         {"score": "1", "escape": "hidden-text"}),
     "read-environ": (nb("import os\nprint(dict(os.environ))\nprint(open('/proc/1/environ').read() if os.path.exists('/proc/1/environ') else '')",
                         SOLUTION), {"score": "1", "escape": "secrets"}),
+    "forged-protocol": (nb(
+        "import json, os, struct\nfor fd in map(int, os.listdir('/proc/self/fd')):\n    try:\n"
+        "        if 'socket' in os.readlink(f'/proc/self/fd/{fd}'):\n"
+        "            fake = {'v': {'op': 'ready', 'cells': [{'bogus': 1}], 'functions': ['x']}, 'bufs': []}\n"
+        "            header = json.dumps(fake).encode()\n"
+        "            os.write(fd, struct.pack('>I', len(header)) + header + b'garbage' * 10)\n"
+        "    except OSError:\n        pass", SOLUTION),
+        {"score": "1", "outcome": "crashed"}),
     "forged-values": (nb(LIAR), {"score": "0", "outcome": "graded", "contains": ["cannot read"]}),
     "patch-numpy": (nb(
         "import numpy as np\nnp.allclose = lambda *a, **k: True\nnp.array_equal = lambda *a, **k: True\n"
