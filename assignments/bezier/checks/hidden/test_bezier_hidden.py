@@ -22,10 +22,8 @@ Computer Aided Geometric Design 29(6), 379-419, 2012. doi:10.1016/j.cagd.2012.03
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -210,13 +208,7 @@ def _endpoint_polygons(rng):
 
 
 def _grade_endpoints(student, credit, rng, fn: str) -> None:
-    verdict = fb.Verdict()
-    for ctrl in _endpoint_polygons(rng):
-        for t in (0.0, 1.0):
-            got = fb.ask(student, fn, ctrl, t)
-            fb.judge_endpoint(got, ctrl, t, fn=fn, atol=LOW_TOL * fb.size(ctrl),
-                              verdict=verdict)
-    verdict.finish(credit)
+    fb.grade_endpoints(student, credit, fn, _endpoint_polygons(rng), rtol=LOW_TOL)
 
 
 @pytest.mark.points(1)

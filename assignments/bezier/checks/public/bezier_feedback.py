@@ -25,7 +25,7 @@ fine up to degree 40 or so) used to describe where a student's polygon goes.
 from __future__ import annotations
 
 import io
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -291,6 +291,17 @@ def judge_endpoint(got: Any, ctrl: np.ndarray, t: float, *, fn: str, atol: float
         return
     raise CheckFailure(f"{message}. A Bezier curve starts at its first control point and ends "
                        "at its last one, because there all Bernstein weights but one are 0.")
+
+
+def grade_endpoints(student: Any, credit: Any, fn: str, polygons: Iterable[np.ndarray], *,
+                    rtol: float) -> None:
+    """Check ``fn`` at t = 0 and t = 1 on every polygon, then award the verdict."""
+    verdict = Verdict()
+    for ctrl in polygons:
+        for t in (0.0, 1.0):
+            got = ask(student, fn, ctrl, t)
+            judge_endpoint(got, ctrl, t, fn=fn, atol=rtol * size(ctrl), verdict=verdict)
+    verdict.finish(credit)
 
 
 # ---------------------------------------------------------------------------

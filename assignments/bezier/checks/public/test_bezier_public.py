@@ -11,8 +11,6 @@ worked examples of the notebook are also written out by hand below.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,14 +93,8 @@ def test_de_casteljau(student, credit, name):
 
 
 def _grade_endpoints(student, credit, fn: str) -> None:
-    verdict = fb.Verdict()
-    for raw in ENDPOINT_POLYGONS:
-        ctrl = np.array(raw, dtype=float)
-        for t in (0.0, 1.0):
-            got = fb.ask(student, fn, ctrl, t)
-            fb.judge_endpoint(got, ctrl, t, fn=fn, atol=REL_TOL * fb.size(ctrl),
-                              verdict=verdict)
-    verdict.finish(credit)
+    polygons = [np.array(raw, dtype=float) for raw in ENDPOINT_POLYGONS]
+    fb.grade_endpoints(student, credit, fn, polygons, rtol=REL_TOL)
 
 
 @pytest.mark.points(1)

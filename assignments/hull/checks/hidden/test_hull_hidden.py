@@ -21,7 +21,6 @@ robustness problems in geometric computations", Computational Geometry 40(1),
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -397,12 +396,7 @@ PLOTS = {"degree-12": (lambda rng: 12, 3),
                                   for k, v in PLOTS.items()])
 def test_plot_runge(student, credit, feedback, rng, case):
     n = PLOTS[case][0](rng)
-    call = f"plot_runge({n})"
-    value, drawn = student.call("plot_runge", n, figures=True)
-    figure, note = fb.pick_figure(value, drawn, call=call)
-    png = fb.png_bytes(figure)
-    if png:
-        feedback.image("your plot", png)
+    figure, note, call = fb.draw_runge_plot(student, feedback, n)
     wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
               fb.Curve("the equispaced interpolant", _interpolant("equispaced", n)),
               fb.Curve("the Chebyshev interpolant", _interpolant("Chebyshev", n))]

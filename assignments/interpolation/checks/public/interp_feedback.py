@@ -366,6 +366,17 @@ def pick_figure(value: Any, drawn: list[Any], *, call: str) -> tuple[dict, str]:
                        f"...; return fig); got {describe(value)} and no figure was drawn.")
 
 
+def draw_runge_plot(student: Any, feedback: Any, n: int) -> tuple[dict, str, str]:
+    """Call ``plot_runge(n)``; return (figure data, note, call text), the picture attached."""
+    call = f"plot_runge({n})"
+    value, drawn = student.call("plot_runge", n, figures=True)
+    figure, note = pick_figure(value, drawn, call=call)
+    png = png_bytes(figure)
+    if png:
+        feedback.image("your plot", png)
+    return figure, note, call
+
+
 def png_bytes(figure: Mapping[str, Any]) -> bytes | None:
     png = figure.get("png")
     if isinstance(png, np.ndarray):

@@ -13,7 +13,6 @@ code ``numpy.polynomial`` is not allowed.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -148,12 +147,7 @@ def test_interp_exact_at_nodes(student):
 @pytest.mark.points(2)
 def test_plot_runge_10(student, credit, feedback):
     n = 10
-    call = f"plot_runge({n})"
-    value, drawn = student.call("plot_runge", n, figures=True)
-    figure, note = fb.pick_figure(value, drawn, call=call)
-    png = fb.png_bytes(figure)
-    if png:
-        feedback.image("your plot", png)
+    figure, note, call = fb.draw_runge_plot(student, feedback, n)
     equispaced, chebyshev = np.linspace(-1.0, 1.0, n + 1), cheb2(n)
     wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
               fb.Curve("the equispaced interpolant", fitted(equispaced)),

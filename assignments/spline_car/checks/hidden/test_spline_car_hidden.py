@@ -13,10 +13,8 @@ fixture: a regrade draws the same inputs, another submission draws others.
 
 from __future__ import annotations
 
-import sys
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable
 
 import numpy as np

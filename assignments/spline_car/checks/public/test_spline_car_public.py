@@ -9,7 +9,6 @@ points, unseen data), a convergence test, and unseen drawings.
 
 from __future__ import annotations
 
-import sys
 from fractions import Fraction
 from pathlib import Path
 
