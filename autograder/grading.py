@@ -25,7 +25,7 @@ from autograder.notebook import Notebook, read_notebook
 from autograder.plugin import CheckContext, GradingPlugin
 from autograder.report import write_result
 from autograder.results import CellError, CheckResult, SubmissionResult
-from autograder.sandbox import IsolationPolicy, Limits
+from autograder.sandbox import IsolationPolicy
 from autograder.session import RunReport, StudentSession, WorkerSlot
 
 #: bump when a change to the engine can change a score (part of every result's key)
@@ -130,7 +130,7 @@ class Grader:
 
     def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None) -> SubmissionResult:
         message = f"This file could not be graded: {problem}"
-        tests, _ = self._run_checks(_Unreadable(message), (), {}, seed, out_dir)
+        tests = self._run_checks(_Unreadable(message), (), {}, seed, out_dir)
         return _result(self.assignment.name, "ungradable", message, tests, seed)
 
     def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None) -> SubmissionResult:
@@ -143,7 +143,7 @@ class Grader:
             exclude=self._excluded_paths(out_dir))
         try:
             run = session.start()
-            tests, log = self._run_checks(session, run.functions, forbidden, seed, out_dir)
+            tests = self._run_checks(session, run.functions, forbidden, seed, out_dir)
         finally:
             session.close()
         outcome = ("timeout" if run.timed_out_cells else
@@ -154,7 +154,7 @@ class Grader:
                                          for c in run.cells if not c.ok))
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
-                    seed: int, out_dir: Path | None) -> tuple[tuple[CheckResult, ...], list[str]]:
+                    seed: int, out_dir: Path | None) -> tuple[CheckResult, ...]:
         context = CheckContext(
             target=target, functions=tuple(functions), forbidden=forbidden,
             call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
@@ -171,7 +171,7 @@ class Grader:
         if out_dir is not None and plugin.instructor_log:
             out_dir.mkdir(parents=True, exist_ok=True)
             (out_dir / "grader.log").write_text("\n\n".join(plugin.instructor_log))
-        return tuple(plugin.results), plugin.instructor_log
+        return tuple(plugin.results)
 
     def _data_files(self) -> list[tuple[Path, str]]:
         root = self.assignment.root
@@ -282,5 +282,5 @@ def _file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "Limits", "forbidden_functions",
+__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "forbidden_functions",
            "run_pytest", "submission_key", "summarise_run"]
