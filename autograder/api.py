@@ -4,15 +4,19 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 from autograder import exports
 from autograder.assignment import Assignment, load_assignment
-from autograder.batch import BatchReport, error_result, grade_batch
+from autograder.backends import DaskSpec, TLSFiles
+from autograder.batch import BatchReport, Shard, error_result, grade_batch
 from autograder.grading import Grader, GradingOptions
 from autograder.release import release as _release
 from autograder.report import write_result
 from autograder.results import SubmissionResult
+
+if TYPE_CHECKING:
+    from autograder.shards import MergeReport
 
 
 def resolve_assignment(spec: str | Path | Assignment) -> Assignment:
@@ -29,17 +33,50 @@ def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, o
           jobs: int | None = None, options: GradingOptions | None = None,
           progress: bool | None = None,
           on_result: Callable[[SubmissionResult], None] | None = None,
-          junit: Path | None = None) -> BatchReport:
+          junit: Path | None = None, dask: DaskSpec | str | None = None,
+          shard: Shard | str | None = None) -> BatchReport:
     """Grade notebooks (files or folders) into ``out``; see :func:`autograder.batch.grade_batch`.
 
-    ``junit``, when given, is a file for the JUnit XML report of the batch.
+    ``junit``, when given, is a file for the JUnit XML report of every result in
+    ``out``. ``dask`` (a :class:`DaskSpec`, or an address such as ``"local:2"``)
+    grades on a Dask cluster instead of ``jobs`` local processes; ``shard``
+    (``"K/N"``) grades only that share of the submissions.
     """
     found = resolve_assignment(assignment)
     report = grade_batch(found, [Path(s) for s in submissions], Path(out),
-                         jobs=jobs, options=options, progress=progress, on_result=on_result)
+                         jobs=jobs, options=options, progress=progress, on_result=on_result,
+                         dask=DaskSpec(dask) if isinstance(dask, str) else dask,
+                         shard=Shard.parse(shard) if isinstance(shard, str) else shard)
     if junit is not None:
-        exports.write_junit(Path(junit), report.results, name=found.name)
+        exports.write_junit(Path(junit), report.folder, name=found.name)
     return report
+
+
+def merge(folders: Sequence[Path], *, out: Path, assignment: str | Path | Assignment | None = None,
+          junit: Path | None = None) -> "MergeReport":
+    """Merge shard result folders into ``out`` with ``grades.csv``, the summary and, if asked, JUnit.
+
+    ``assignment``, when given, only supplies the summary's title.
+    """
+    from autograder.shards import merge_results
+
+    title = resolve_assignment(assignment).title if assignment is not None else None
+    report = merge_results([Path(f) for f in folders], out=Path(out), title=title)
+    if junit is not None:
+        name = report.results[0].assignment if report.results else ""
+        exports.write_junit(Path(junit), report.results, name=name)
+    return report
+
+
+def run_worker(address: str, *, slots: int = 1, tls: TLSFiles | None = None,
+               insecure: bool = False) -> None:
+    """Serve ``slots`` grading slots to the Dask scheduler at ``address`` until stopped.
+
+    Needs the ``dask`` extra (``pip install "numgrade[dask]"``).
+    """
+    from autograder.backends import load_dask_backend
+
+    load_dask_backend().run_worker(address, slots=slots, tls=tls, insecure=insecure)
 
 
 def ci_report(report: BatchReport, *, step_summary: Path | None = None) -> list[str]:

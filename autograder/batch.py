@@ -1,27 +1,27 @@
-"""Grade many submissions: unique ids, resume, parallel slots, a progress bar.
+"""Grade many submissions: unique ids, resume, a backend, a progress bar, the class folder.
 
-Each slot is a separate (trusted) Python process holding one :class:`Grader`
-and its warm worker; the batch hands it one file at a time. Any engine that can
-call :func:`grade_one` per file (Dask, Ray, a queue) could replace the process
-pool here.
+The results folder is the unit of export: whatever this run graded, ``grades.csv``
+and the summary are rebuilt from every ``<id>/results.json`` in the folder, so
+grading one late notebook into the class's folder keeps everyone else's row.
+Where the gradings run is a backend's business (:mod:`autograder.backends`: the
+local process pool, or a Dask cluster).
 """
 
 from __future__ import annotations
 
-import multiprocessing
-import os
+import hashlib
 import re
 import sys
+import time
 import traceback
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 from tqdm import tqdm
 
-from autograder.assignment import Assignment, load_assignment
+from autograder.assignment import Assignment
+from autograder.backends import DaskSpec, Job, make_backend
 from autograder.errors import UsageError
 from autograder.feedback import FEEDBACK_NAME, write_feedback
 from autograder.grading import Grader, GradingOptions, submission_key, _file_sha256
@@ -29,20 +29,60 @@ from autograder.report import RESULTS_NAME, read_result, write_grades, write_res
 from autograder.results import SubmissionResult
 from autograder.summary import write_summary
 
+#: files and folders the batch itself writes at the top of a results folder; never ids
+RESERVED_NAMES = frozenset({"grades.csv", "summary.html", "summary.json", "junit.xml",
+                            "images", "feedback.html", "results.json"})
+
 
 @dataclass(frozen=True)
 class BatchReport:
-    """What a batch run did."""
+    """What a batch run did.
+
+    ``results`` holds this run's submissions (graded or reused); ``folder`` every
+    result of the assignment in the results folder, from which the exports were
+    written (this run's and earlier ones').
+    """
 
     results: tuple[SubmissionResult, ...]
     graded: int
     reused: int
     seconds: float
+    folder: tuple[SubmissionResult, ...] = ()
+    #: submissions left to other shards (``--shard K/N``)
+    other_shards: int = 0
 
     @property
     def failed(self) -> tuple[SubmissionResult, ...]:
         """Submissions the grader itself could not grade (outcome "error")."""
         return tuple(r for r in self.results if r.outcome == "error")
+
+
+@dataclass(frozen=True)
+class Shard:
+    """``K/N``: the submissions whose id hashes to K modulo N (0 <= K < N).
+
+    The hash is SHA-256 of the id, so every machine of a job array picks the
+    same submissions from the same folder, whatever its Python or its order.
+    """
+
+    index: int
+    count: int
+
+    def __post_init__(self) -> None:
+        if not (self.count >= 1 and 0 <= self.index < self.count):
+            raise UsageError(f"--shard {self.index}/{self.count}: write K/N with 0 <= K < N "
+                             "(e.g. 0/3, 1/3 and 2/3 for three machines).")
+
+    @classmethod
+    def parse(cls, text: str) -> "Shard":
+        match = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", text)
+        if match is None:
+            raise UsageError(f"--shard {text!r}: write K/N, e.g. 0/3 (K counts from 0).")
+        return cls(int(match[1]), int(match[2]))
+
+    def holds(self, sub_id: str) -> bool:
+        value = int.from_bytes(hashlib.sha256(sub_id.encode("utf-8")).digest()[:8], "big")
+        return value % self.count == self.index
 
 
 def collect_submissions(paths: Iterable[Path]) -> list[Path]:
@@ -67,50 +107,64 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "-", text).strip("-.") or "submission"
 
 
-def assign_ids(paths: Sequence[Path]) -> dict[Path, str]:
-    """Readable unique ids: the file stem, plus the folders that tell colliding stems apart.
+def place_name(path: Path) -> str:
+    """The name a file's place gives it: ``<student>`` in nbgrader's layout, else the stem.
 
-    ``submitted/alice/hull/hull.ipynb`` and ``submitted/bob/hull/hull.ipynb``
-    become ``alice-hull`` and ``bob-hull``.
+    nbgrader keeps submissions as ``submitted/<student>/<assignment>/<notebook>.ipynb``;
+    the student's folder is what an LMS roster knows, whether one file or the
+    whole ``submitted/`` folder is given.
+    """
+    parts = path.parts
+    if len(parts) >= 4 and parts[-4] == "submitted":
+        return parts[-3]
+    return path.stem
+
+
+def assign_ids(paths: Sequence[Path]) -> dict[Path, str]:
+    """Readable unique ids from each file's place (see :func:`place_name`).
+
+    When names collide, the stem and then the folders that tell the files apart
+    are added: two notebooks of one student become ``alice-hull`` and
+    ``alice-extra``; ``a/x.ipynb`` and ``b/x.ipynb`` become ``a-x`` and ``b-x``.
+    An id is never a name the batch writes itself (``grades.csv``, ``summary.html``...).
     """
     ids: dict[Path, str] = {}
-    by_stem: dict[str, list[Path]] = {}
+    by_name: dict[str, list[Path]] = {}
     for path in paths:
-        by_stem.setdefault(path.stem, []).append(path)
-    for stem, group in by_stem.items():
+        by_name.setdefault(place_name(path), []).append(path)
+    for name, group in by_name.items():
         if len(group) == 1:
-            ids[group[0]] = _slug(stem)
+            ids[group[0]] = _slug(name)
             continue
-        depth = 1
-        while depth < 64:
-            labels = [tuple(p.parts[-1 - depth:-1]) for p in group]
-            if len(set(labels)) == len(group):
-                break
-            depth += 1
-        for path in group:
-            parts = [q for q in path.parts[-1 - depth:-1]] + [stem]
-            deduped = [q for i, q in enumerate(parts) if i == 0 or q != parts[i - 1]]
-            ids[path] = _slug("-".join(deduped))
+        with_stem = [name if p.stem == name else f"{name}-{p.stem}" for p in group]
+        if len(set(with_stem)) == len(group):
+            ids.update(zip(group, map(_slug, with_stem)))
+            continue
+        ids.update(_by_folders(group))
     taken: dict[str, int] = {}
     for path in paths:  # a last resort for ids that still collide after slugging
         base = ids[path]
+        if base.lower() in RESERVED_NAMES:
+            base = f"{base}-submission"
         taken[base] = taken.get(base, 0) + 1
-        if taken[base] > 1:
-            ids[path] = f"{base}-{taken[base]}"
+        ids[path] = base if taken[base] == 1 else f"{base}-{taken[base]}"
     return ids
 
 
-# One Grader per pool process: the warm worker is the point of the pool. This is the
-# package's only module-level state, and it lives only in pool processes.
-_GRADER: Grader | None = None
-
-
-def _init_slot(assignment_root: str, options: GradingOptions, counter: Any) -> None:
-    global _GRADER
-    with counter.get_lock():
-        slot = counter.value
-        counter.value += 1
-    _GRADER = Grader(load_assignment(Path(assignment_root)), options, slot=slot)
+def _by_folders(group: Sequence[Path]) -> dict[Path, str]:
+    """Ids from the stem and as many parent folders as it takes to tell ``group`` apart."""
+    depth = 1
+    while depth < 64:
+        labels = [tuple(p.parts[-1 - depth:-1]) for p in group]
+        if len(set(labels)) == len(group):
+            break
+        depth += 1
+    ids = {}
+    for path in group:
+        parts = list(path.parts[-1 - depth:-1]) + [path.stem]
+        deduped = [q for i, q in enumerate(parts) if i == 0 or q != parts[i - 1]]
+        ids[path] = _slug("-".join(deduped))
+    return ids
 
 
 def grade_one(grader: Grader, path: Path, sub_id: str, out_dir: Path) -> SubmissionResult:
@@ -123,9 +177,16 @@ def grade_one(grader: Grader, path: Path, sub_id: str, out_dir: Path) -> Submiss
     try:
         result = grader.grade(path, id=sub_id, out_dir=folder)
     except Exception as exc:  # the grader's own failure: record it, never lose the file
-        result = error_result(grader.assignment, path, sub_id, exc)
-        write_result(folder, result)
+        return store_error(out_dir, error_result(grader.assignment, path, sub_id, exc),
+                           grader.assignment.title)
     write_feedback(folder, result, title=grader.assignment.title)
+    return result
+
+
+def store_error(out_dir: Path, result: SubmissionResult, title: str) -> SubmissionResult:
+    """Write an "error" result and its feedback page into ``out_dir/<id>/``; return it."""
+    write_result(out_dir / result.id, result)
+    write_feedback(out_dir / result.id, result, title=title)
     return result
 
 
@@ -140,13 +201,11 @@ def refresh_feedback(folder: Path, result: SubmissionResult, title: str) -> None
         write_feedback(folder, result, title=title)
 
 
-def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
-    assert _GRADER is not None
-    return grade_one(_GRADER, Path(path), sub_id, Path(out_dir)).to_dict()
-
-
-def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException) -> SubmissionResult:
-    detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException | str) -> SubmissionResult:
+    if isinstance(exc, BaseException):
+        detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+    else:
+        detail = exc
     return SubmissionResult(
         id=sub_id, source=str(path), assignment=assignment.name, key="",
         sha256=_file_sha256(path), outcome="error",
@@ -154,35 +213,73 @@ def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseExcep
         tests=(), execution_time=0.0, seed=0)
 
 
+def client_key(path: Path, assignment: Assignment, options: GradingOptions) -> str:
+    """The key a result of ``path`` must carry to be reused (computed where the file is)."""
+    return submission_key(_file_sha256(path), assignment, options)
+
+
+def folder_results(out_dir: Path, assignment: str) -> tuple[SubmissionResult, ...]:
+    """Every result of ``assignment`` in ``out_dir`` (``<id>/results.json``), sorted by id.
+
+    Raises
+    ------
+    UsageError
+        When the folder holds results of another assignment: one folder per
+        assignment, so that its ``grades.csv`` is one gradebook column.
+    """
+    found = []
+    for folder in sorted(p for p in out_dir.iterdir() if p.is_dir()) if out_dir.is_dir() else ():
+        result = read_result(folder)
+        if result is None:
+            continue
+        if result.assignment and result.assignment != assignment:
+            raise UsageError(
+                f"{str(out_dir)!r} holds results of assignment {result.assignment!r} "
+                f"({folder.name}/results.json); grade {assignment!r} into a folder of its own.")
+        found.append(result)
+    return tuple(found)
+
+
+def write_exports(out_dir: Path, assignment: Assignment) -> tuple[SubmissionResult, ...]:
+    """Rewrite ``grades.csv``, ``summary.json`` and ``summary.html`` from every result in the folder."""
+    results = folder_results(out_dir, assignment.name)
+    write_grades(out_dir, results)
+    write_summary(out_dir, results, title=assignment.title, assignment=assignment.name)
+    return results
+
+
 def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Path, *,
                 jobs: int | None = None, options: GradingOptions | None = None,
                 progress: bool | None = None,
-                on_result: Callable[[SubmissionResult], None] | None = None) -> BatchReport:
+                on_result: Callable[[SubmissionResult], None] | None = None,
+                dask: DaskSpec | None = None, shard: Shard | None = None) -> BatchReport:
     """Grade every submission into ``out_dir``, reusing results whose key is unchanged.
 
     Writes ``<id>/results.json`` and ``<id>/feedback.html`` as each submission
     finishes, then ``grades.csv``, ``summary.json`` and ``summary.html`` from
-    every result (reused ones included).
+    every result in ``out_dir`` (earlier runs' included). ``dask`` sends the
+    gradings to a Dask cluster instead of the local pool of ``jobs`` processes;
+    ``shard`` keeps only the submissions of that shard.
     """
-    import time
-
     start = time.perf_counter()
     options = options or GradingOptions()
     paths = collect_submissions(submissions)
     ids = assign_ids(paths)
+    if shard is not None:
+        paths = [p for p in paths if shard.holds(ids[p])]
     out_dir.mkdir(parents=True, exist_ok=True)
+    folder_results(out_dir, assignment.name)  # refuse another assignment's folder before grading
     done: dict[str, SubmissionResult] = {}
-    todo: list[Path] = []
+    todo: list[Job] = []
     for path in paths:
         previous = read_result(out_dir / ids[path])
-        key = submission_key(_file_sha256(path), assignment, options)
+        key = client_key(path, assignment, options)
         if previous is not None and previous.key == key and previous.outcome != "error":
             done[ids[path]] = previous
             refresh_feedback(out_dir / ids[path], previous, assignment.title)
         else:
-            todo.append(path)
+            todo.append(Job(path, ids[path]))
     reused = len(done)
-    jobs = max(1, min(jobs or os.cpu_count() or 1, len(todo) or 1))
     bar = tqdm(total=len(paths), initial=reused, unit="nb", desc=assignment.name,
                disable=(not sys.stderr.isatty()) if progress is None else not progress)
 
@@ -192,45 +289,16 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
         if on_result is not None:
             on_result(result)
 
-    if jobs == 1:
-        with Grader(assignment, options) as grader:
-            for path in todo:
-                finished(grade_one(grader, path, ids[path], out_dir))
-    else:
-        _run_pool(assignment, options, jobs, [(p, ids[p]) for p in todo], out_dir, finished)
-    bar.close()
-    results = tuple(done[ids[p]] for p in paths)
-    write_grades(out_dir, results)
-    write_summary(out_dir, results, title=assignment.title, assignment=assignment.name)
-    return BatchReport(results=results, graded=len(todo), reused=reused,
-                       seconds=time.perf_counter() - start)
-
-
-def _run_pool(assignment: Assignment, options: GradingOptions, jobs: int,
-              work: list[tuple[Path, str]], out_dir: Path,
-              finished: Callable[[SubmissionResult], None]) -> None:
-    """Run ``work`` on ``jobs`` slots; if a slot process dies, rebuild and retry once."""
-    context = multiprocessing.get_context("spawn")
-    attempts: dict[str, int] = {}
-    pending = list(work)
-    while pending:
-        counter = context.Value("i", 0)
-        broken: list[tuple[Path, str]] = []
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_init_slot,
-                                 initargs=(str(assignment.root), options, counter)) as pool:
-            futures: dict[Future[dict[str, Any]], tuple[Path, str]] = {
-                pool.submit(_grade_in_slot, str(p), i, str(out_dir)): (p, i) for p, i in pending}
-            for future in as_completed(futures):
-                path, sub_id = futures[future]
-                try:
-                    finished(SubmissionResult.from_dict(future.result()))
-                except BrokenProcessPool as exc:
-                    attempts[sub_id] = attempts.get(sub_id, 0) + 1
-                    if attempts[sub_id] >= 2:
-                        result = error_result(assignment, path, sub_id, exc)
-                        write_result(out_dir / sub_id, result)
-                        write_feedback(out_dir / sub_id, result, title=assignment.title)
-                        finished(result)
-                    else:
-                        broken.append((path, sub_id))
-        pending = broken
+    try:
+        if todo:
+            make_backend(jobs=jobs, dask=dask).run(assignment, options, todo, out_dir, finished)
+    finally:
+        bar.close()
+    missing = [job for job in todo if job.id not in done]
+    for job in missing:  # a backend must answer for every job; if not, say so as an error
+        finished(store_error(out_dir, error_result(assignment, job.path, job.id,
+                                                   "no result came back for it"), assignment.title))
+    folder = write_exports(out_dir, assignment)
+    return BatchReport(results=tuple(done[ids[p]] for p in paths), graded=len(todo),
+                       reused=reused, seconds=time.perf_counter() - start, folder=folder,
+                       other_shards=len(ids) - len(paths))

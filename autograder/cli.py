@@ -71,7 +71,39 @@ def build_parser() -> argparse.ArgumentParser:
     chk.add_argument("--assignment", default=None,
                      help="assignment name or folder (default: the folder the notebook is in)")
     _timing_options(chk)
+    _service_commands(commands)
     return parser
+
+
+def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    srv = commands.add_parser("serve", help="run the grading service for a course (web pages, queue, graders)")
+    srv.add_argument("course", type=Path, help="the course TOML file (see examples/course/course.toml)")
+    srv.add_argument("--host", default="127.0.0.1", help="address to listen on (default: 127.0.0.1)")
+    srv.add_argument("--port", type=_positive_int, default=8000, help="port to listen on (default: 8000)")
+    srv.add_argument("--database", default=None, metavar="URL",
+                     help="sqlite:///FILE or postgresql://USER@HOST/NAME (default: the course file's, "
+                          "else an SQLite file in the course's data folder)")
+    srv.add_argument("--jobs", type=_positive_int, default=None,
+                     help=f"grading processes (default: number of cores, {os.cpu_count()})")
+    srv.add_argument("--lease", type=_positive_float, default=None, metavar="SECONDS",
+                     help="how long a grading claim lasts without renewal before another grader "
+                          "takes the job over (default: 30)")
+
+    ros = commands.add_parser("roster", help="import a roster CSV (id, name, email[, role]) into a course")
+    ros.add_argument("course", type=Path, help="the course TOML file")
+    ros.add_argument("roster", type=Path, help="CSV with columns id, name, email and optionally role")
+    ros.add_argument("--database", default=None, metavar="URL", help="as for `autograder serve`")
+    ros.add_argument("--tokens", type=Path, default=None, metavar="FILE",
+                     help="where to write the new access tokens (default: tokens.csv in the data folder)")
+
+    sub = commands.add_parser("submit", help="submit a notebook to a grading service and print the score")
+    sub.add_argument("notebook", type=Path, help="your notebook")
+    sub.add_argument("--server", required=True, help="the service's address, e.g. https://grader.example.edu")
+    sub.add_argument("--token", default=os.environ.get("AUTOGRADER_TOKEN"),
+                     help="your access token (default: $AUTOGRADER_TOKEN)")
+    sub.add_argument("--assignment", default=None, help="assignment name (default: the notebook's name)")
+    sub.add_argument("--wait", type=_positive_float, default=600.0, metavar="SECONDS",
+                     help="how long to wait for the grade (default: 600)")
 
 
 def _timing_options(parser: argparse.ArgumentParser) -> None:
@@ -146,6 +178,34 @@ def _gradescope(args: argparse.Namespace) -> int:
     return 0
 
 
+def _serve(args: argparse.Namespace) -> int:
+    from autograder.service.server import serve
+
+    serve(args.course, host=args.host, port=args.port, database=args.database, jobs=args.jobs,
+          lease_seconds=args.lease)
+    return 0
+
+
+def _roster(args: argparse.Namespace) -> int:
+    from autograder.service.server import import_roster, open_course
+
+    course = open_course(args.course, database=args.database)
+    count, tokens = import_roster(course, args.roster, tokens_out=args.tokens)
+    print(f"Imported {count} people into {course.name}.")
+    print(f"New access tokens: {tokens} (send each person theirs; the database keeps only hashes)."
+          if tokens else "Everyone already had a token; none were made.")
+    return 0
+
+
+def _submit(args: argparse.Namespace) -> int:
+    from autograder.service.client import describe, submit
+
+    result = submit(args.notebook, server=args.server, token=args.token or "",
+                    assignment=args.assignment, wait=args.wait)
+    print(describe(result))
+    return 0 if result.status == "graded" else 1
+
+
 def _say_missing_protections() -> None:
     """Say once, before grading, which protections this machine cannot give."""
     for note in probe_support().notes:
@@ -155,8 +215,9 @@ def _say_missing_protections() -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    handlers = {"release": _release, "grade": _grade, "check": _check, "gradescope": _gradescope}
-    if args.command in ("grade", "check"):
+    handlers = {"release": _release, "grade": _grade, "check": _check, "gradescope": _gradescope,
+                "serve": _serve, "roster": _roster, "submit": _submit}
+    if args.command in ("grade", "check", "serve"):
         _say_missing_protections()
     try:
         return handlers[args.command](args)

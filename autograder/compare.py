@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from autograder.errors import CheckFailure
 
 __all__ = [
+    "CheckFailure",
     "describe",
     "expect_array",
     "expect_close",
@@ -85,26 +86,62 @@ def expect_int(got: Any, *, name: str = "the result") -> int:
 
 def expect_close(got: Any, expected: Any, *, rtol: float, atol: float,
                  name: str = "the result") -> NDArray[Any]:
-    """Check ``got`` against ``expected`` elementwise within ``atol + rtol * |expected|``."""
+    """Check ``got`` against ``expected`` elementwise within ``atol + rtol * |expected|``.
+
+    Stages: type and shape (:func:`expect_array`), then non-finite values (NaN
+    exactly where NaN is expected, an infinity exactly where the same infinity
+    is expected), then the finite values against the tolerance. Each failure
+    names the first offending index.
+    """
     want = np.asarray(expected)
+    if want.dtype.kind not in "biufc":
+        raise TypeError(f"`expected` must hold numbers; got dtype {want.dtype}.")
     arr = expect_array(got, shape=want.shape, dtype_kind="biufc", name=name)
-    bad_nan = np.isnan(arr) & ~np.isnan(want)
-    if bad_nan.any():
-        where = tuple(int(i) for i in np.argwhere(bad_nan)[0])
-        raise CheckFailure(f"{name} has NaN at index {_index(where)} where "
-                           f"{float(want[where]):.6g} was expected.")
-    err = np.abs(arr.astype(complex if arr.dtype.kind == "c" else float) - want)
-    bound = atol + rtol * np.abs(want)
+    kind = complex if "c" in (arr.dtype.kind, want.dtype.kind) else float
+    g, w = arr.astype(kind), want.astype(kind)
+    _expect_same_non_finite(g, w, name)
+    finite = np.isfinite(w)
+    err = np.where(finite, np.abs(g - np.where(finite, w, 0)), 0.0).astype(float)
+    bound = atol + rtol * np.where(finite, np.abs(w), 0.0)
     over = err > bound
     if over.any():
         where = tuple(int(i) for i in np.unravel_index(np.argmax(err - bound), err.shape)) \
             if err.ndim else ()
-        g, w = arr[where], want[where]
         raise CheckFailure(
-            f"{name} is off at index {_index(where)}: expected {w:.10g}, got {g:.10g} "
-            f"(error {float(err[where]):.2e}, allowed {float(bound[where]):.2e}); "
-            f"{int(over.sum())} of {over.size} value(s) are outside the tolerance.")
+            f"{name} is off at index {_index(where)}: expected {_num(w[where])}, got "
+            f"{_num(g[where])} (error {float(err[where]):.2e}, allowed "
+            f"{float(bound[where]):.2e}); {int(over.sum())} of {over.size} value(s) are "
+            "outside the tolerance.")
     return arr
+
+
+def _num(value: Any) -> str:
+    """A number as the shortest text that reads back as the same double (``repr``)."""
+    if isinstance(value, (complex, np.complexfloating)):
+        return repr(complex(value))
+    value = float(value)
+    if value.is_integer() and abs(value) < 2.0**53:
+        return str(int(value))
+    return repr(value)
+
+
+def _expect_same_non_finite(got: NDArray[Any], want: NDArray[Any], name: str) -> None:
+    """Fail at the first index where NaN or an infinity is in one array and not the other."""
+    def label(v: Any) -> str:
+        return "NaN" if np.isnan(v) else ("+inf" if np.real(v) > 0 or np.imag(v) > 0
+                                          else "-inf") if np.isinf(v) else _num(v)
+
+    got_nan, want_nan = np.isnan(got), np.isnan(want)
+    got_inf, want_inf = np.isinf(got) & ~got_nan, np.isinf(want) & ~want_nan
+    mismatch = (got_nan != want_nan) | (got_inf != want_inf)
+    mismatch |= got_inf & want_inf & (got != want)  # +inf against -inf
+    if mismatch.any():
+        where = tuple(int(i) for i in np.argwhere(mismatch)[0])
+        g, w = got[where], want[where]
+        count = int(mismatch.sum())
+        more = f" ({count} of {mismatch.size} values differ so)" if count > 1 else ""
+        raise CheckFailure(f"{name} has {label(g)} at index {_index(where)} where "
+                           f"{label(w)} was expected{more}.")
 
 
 def _index(where: tuple[int, ...]) -> str:

@@ -12,7 +12,9 @@ missing, the *backward* one (from the student to the reference) when the
 student drew something extra.
 
 :func:`render_side_by_side` makes the picture a check attaches to its result:
-the student's drawing on the left, the reference on the right.
+the student's drawing on the left, the reference (drawn by a function the
+assignment's checks give) on the right. Course content (the car, its splines)
+lives in the assignments, never here.
 
 This module runs on the trusted side only.
 """
@@ -21,7 +23,8 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Iterable, Mapping, Sequence
+import struct
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +35,7 @@ from scipy.spatial import cKDTree
 __all__ = [
     "CurveDistance",
     "curve_points",
-    "strokes_points",
+    "decode_png",
     "hausdorff",
     "relative_curve_distance",
     "render_side_by_side",
@@ -50,6 +53,10 @@ _SIDE_BY_SIDE_INCHES = (10.0, 4.0)
 _SIDE_BY_SIDE_DPI = 80
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+#: Largest picture (width x height) decoded from a student's PNG: 4 times a
+#: full-HD screen, far beyond any figure a notebook draws at normal dpi.
+MAX_PNG_PIXELS = 4 * 1920 * 1080
 
 
 # ---------------------------------------------------------------------------
@@ -160,21 +167,6 @@ def curve_points(figure: Mapping[str, Any], *,
     return np.concatenate(parts) if parts else np.empty((0, 2))
 
 
-def strokes_points(strokes: Iterable[ArrayLike], *, num: int = 400) -> NDArray[np.float64]:
-    """Points along the reference drawing of ``strokes``, as one ``(k, 2)`` array.
-
-    Each stroke is drawn as a parametric natural cubic spline with chord-length
-    parameter (:func:`reference.splines.parametric_spline`, its defaults) and
-    sampled at ``num`` parameter values.
-    """
-    from reference.splines import parametric_spline
-
-    parts = [parametric_spline(np.asarray(s, dtype=np.float64)).sample(num) for s in strokes]
-    if not parts:
-        raise ValueError("`strokes` must hold at least one stroke; got none.")
-    return np.concatenate(parts)
-
-
 # ---------------------------------------------------------------------------
 # distances
 # ---------------------------------------------------------------------------
@@ -268,8 +260,8 @@ def relative_curve_distance(student_pts: ArrayLike, reference_pts: ArrayLike) ->
     Parameters
     ----------
     student_pts, reference_pts : array_like, shape (k, 2)
-        Points of the two drawings (see :func:`curve_points` and
-        :func:`strokes_points`).  Non-finite points are ignored.
+        Points of the two drawings (see :func:`curve_points`; the reference
+        drawing's points come from the assignment's checks).  Non-finite points are ignored.
 
     Returns
     -------
@@ -305,8 +297,13 @@ def relative_curve_distance(student_pts: ArrayLike, reference_pts: ArrayLike) ->
 # ---------------------------------------------------------------------------
 
 
-def _decode_png(png: Any) -> NDArray[Any] | None:
-    """The image in ``png`` (bytes or a uint8 array of them), or None if it is not a PNG."""
+def decode_png(png: Any, *, max_pixels: int = MAX_PNG_PIXELS) -> NDArray[Any] | None:
+    """The image in ``png`` (bytes or a uint8 array of them), or None if it is not a usable PNG.
+
+    The size in the PNG header is read first: a picture larger than
+    ``max_pixels`` (a small file can claim 13,000 x 13,000 pixels) is never
+    decompressed, so a student's figure cannot exhaust the grader's memory.
+    """
     import matplotlib.image as mpimg
 
     if isinstance(png, np.ndarray) and png.dtype == np.uint8:
@@ -314,7 +311,10 @@ def _decode_png(png: Any) -> NDArray[Any] | None:
     if not isinstance(png, (bytes, bytearray, memoryview)):
         return None
     data = bytes(png)
-    if not data.startswith(_PNG_SIGNATURE):
+    if not data.startswith(_PNG_SIGNATURE) or len(data) < 24 or data[12:16] != b"IHDR":
+        return None
+    width, height = struct.unpack(">II", data[16:24])
+    if width * height > max_pixels:
         return None
     try:
         return mpimg.imread(io.BytesIO(data), format="png")
@@ -322,19 +322,23 @@ def _decode_png(png: Any) -> NDArray[Any] | None:
         return None
 
 
-def render_side_by_side(student_png: bytes | None, reference_strokes: Sequence[ArrayLike], *,
-                        title: str = "your drawing (left) and the reference (right)") -> bytes:
+def render_side_by_side(student_png: bytes | None, draw_reference: Callable[[Any], object], *,
+                        title: str = "your drawing (left) and the reference (right)",
+                        left_title: str = "your drawing",
+                        right_title: str = "reference") -> bytes:
     """A PNG with the student's picture on the left and the reference drawing on the right.
 
     Parameters
     ----------
     student_png : bytes or None
         The PNG of the student's figure (``figure_data["png"]``).  If it is
-        missing or cannot be decoded, the left panel says so.
-    reference_strokes : sequence of array_like
-        Strokes drawn on the right with :func:`reference.plotting.plot_car`.
-    title : str, optional
-        The picture's title.
+        missing, too large or cannot be decoded, the left panel says so.
+    draw_reference : callable
+        ``draw_reference(ax)`` draws the reference on the right-hand
+        ``Axes``.  What the reference is (a car, a curve, a mesh) belongs to
+        the assignment's checks, not to the engine.
+    title, left_title, right_title : str, optional
+        The picture's title and the two panels' titles.
 
     Returns
     -------
@@ -344,12 +348,10 @@ def render_side_by_side(student_png: bytes | None, reference_strokes: Sequence[A
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from reference.plotting import plot_car
-
     fig = Figure(figsize=_SIDE_BY_SIDE_INCHES, dpi=_SIDE_BY_SIDE_DPI)
     FigureCanvasAgg(fig)
     left, right = fig.subplots(1, 2)
-    image = _decode_png(student_png)
+    image = decode_png(student_png)
     left.set_axis_off()
     if image is None:
         left.text(0.5, 0.5, "no picture of your drawing\n(no figure came back, or it could "
@@ -357,9 +359,9 @@ def render_side_by_side(student_png: bytes | None, reference_strokes: Sequence[A
                   ha="center", va="center", fontsize=12, transform=left.transAxes)
     else:
         left.imshow(image)
-    left.set_title("your drawing")
-    plot_car(right, [np.asarray(s, dtype=np.float64) for s in reference_strokes])
-    right.set_title("reference")
+    left.set_title(left_title)
+    draw_reference(right)
+    right.set_title(right_title)
     right.tick_params(labelsize=8)
     fig.suptitle(title)
     fig.tight_layout()

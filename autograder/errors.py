@@ -20,7 +20,9 @@ __all__ = [
     "CallTimeout",
     "UnsupportedValue",
     "WorkerCrashed",
+    "NotRun",
     "ForbiddenUse",
+    "EngineError",
     "CheckFailure",
     "PartialCredit",
 ]
@@ -77,6 +79,19 @@ class UnsupportedValue(StudentError, TypeError):
 
 class WorkerCrashed(StudentError):
     """The worker process died (killed by a limit, exited, or crashed)."""
+
+
+class NotRun(StudentError):
+    """A call was not made: the function ran out of time earlier on an input at least as large,
+    or the submission used up its whole time budget."""
+
+
+class EngineError(AutograderError):
+    """The engine could not grade properly (worker set-up, incomplete sandbox, broken check run).
+
+    Never a verdict on the student: the submission gets an ``error`` result, which is
+    shown to the instructor and graded again on the next run.
+    """
 
 
 class ForbiddenUse(StudentError):

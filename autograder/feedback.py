@@ -11,8 +11,9 @@ What a student sees:
 * the score, and the grader's summary of how the notebook ran;
 * every public check with its status, points, message and pictures (for a
   figure check: the student's drawing beside the reference's);
-* hidden checks by name and message only (no points, no pictures: a picture of
-  an unseen dataset would show the dataset), with their points added up;
+* hidden checks by name, status, points and message (never their data, code or
+  pictures: a picture of an unseen dataset would show the dataset; when a
+  hidden check made one, the page says that it is not shown);
 * the cells that raised, with their tracebacks, and the notebook's printed
   output, both cut to a readable length.
 """
@@ -48,7 +49,8 @@ _MAGIC = {b"\x89PNG\r\n\x1a\n": "image/png", b"\xff\xd8\xff": "image/jpeg", b"GI
 KIND_LABELS = {
     "ok": "passed", "wrong": "wrong answer", "partial": "partial credit",
     "exception": "your code raised an error", "missing": "function missing",
-    "timeout": "took too long", "unsupported": "answer could not be checked",
+    "timeout": "took too long", "not-run": "not run (an earlier input ran out of time)",
+    "unsupported": "answer could not be checked",
     "crashed": "your code stopped the worker", "forbidden": "uses something not allowed",
     "check-error": "the check itself failed (not your fault)",
 }
@@ -144,7 +146,13 @@ def _public_view(folder: Path, check: CheckResult) -> dict[str, object]:
 
 
 def _hidden_view(check: CheckResult) -> dict[str, object]:
-    return {"name": check.name, "message": clean_text(check.output)}
+    """Status, points and message of a hidden check: never its data, code or pictures."""
+    status = check_status(check)
+    label = "passed" if status == "passed" else KIND_LABELS.get(check.kind, check.kind)
+    return {"name": check.name, "status": status, "label": label,
+            "score": f"{check.score:g}", "max_score": f"{check.max_score:g}",
+            "message": clean_text(check.output),
+            "pictures_withheld": len(check.attachments)}
 
 
 def feedback_context(folder: Path, result: SubmissionResult, *, title: str | None = None

@@ -7,7 +7,9 @@ distributed one later) only has to call :meth:`Grader.grade` per file.
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import importlib.util
 import os
 import sys
 import time
@@ -20,8 +22,8 @@ import pytest
 import autograder
 from autograder import staticscan
 from autograder.assignment import Assignment
-from autograder.errors import AssignmentError, NotebookError, WorkerCrashed
-from autograder.notebook import Notebook, read_notebook
+from autograder.errors import AssignmentError, EngineError, NotebookError, WorkerCrashed
+from autograder.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.plugin import CheckContext, GradingPlugin
 from autograder.report import write_result
 from autograder.results import CellError, CheckResult, SubmissionResult
@@ -43,9 +45,15 @@ class GradingOptions:
     #: a notebook full of outputs is still graded (outputs are dropped on reading)
     max_notebook_bytes: int = 64 * 1024 * 1024
 
+    #: CPU seconds one submission may use in all (notebook, restarts, calls);
+    #: None: the notebook limit plus 20 call limits
+    cpu_budget: float | None = None
+
     def digest(self) -> str:
-        return hashlib.sha256(repr((self.public_only, self.notebook_timeout,
-                                    self.call_timeout)).encode()).hexdigest()[:16]
+        """Everything in the options that can change a score, the isolation policy included."""
+        return hashlib.sha256(repr((self.public_only, self.notebook_timeout, self.call_timeout,
+                                    self.cpu_budget, self.max_notebook_bytes,
+                                    self.policy)).encode()).hexdigest()[:16]
 
 
 def policy_for(assignment: Assignment, options: GradingOptions) -> IsolationPolicy:
@@ -58,9 +66,62 @@ def policy_for(assignment: Assignment, options: GradingOptions) -> IsolationPoli
 
 
 def submission_key(sha256: str, assignment: Assignment, options: GradingOptions) -> str:
-    """Identifies a grading: same file, same checks, same engine -> same key."""
-    text = "|".join((sha256, assignment.checks_digest, ENGINE_VERSION, options.digest()))
+    """Identifies a grading: a result is reused only when this key is unchanged.
+
+    It hashes the notebook's bytes, everything in the assignment folder that
+    grading reads (``assignment.toml``, the instructor notebook, data, checks;
+    not ``examples/``), the sources of the engine and of ``reference``, and the
+    options with the whole isolation policy.
+    """
+    text = "|".join((sha256, assignment_digest(assignment), engine_digest(), ENGINE_VERSION,
+                     options.digest(), repr(assignment.limits)))
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def submission_seed(assignment: Assignment, student: str) -> int:
+    """The seed of a submission's unseen data: from the assignment and the student only.
+
+    Never from the file's bytes, so a comment, whitespace or the time of grading
+    cannot change the data a submission is graded on.
+    """
+    text = f"{assignment.name}\0{student}"
+    return int(hashlib.sha256(text.encode()).hexdigest()[:8], 16)
+
+
+#: folders of an assignment that grading never reads
+_NOT_GRADED = frozenset({"examples", "__pycache__", ".ipynb_checkpoints", ".pytest_cache", ".git"})
+
+
+@functools.lru_cache(maxsize=32)
+def assignment_digest(assignment: Assignment) -> str:
+    """SHA-256 over the files of the assignment folder that grading reads."""
+    return _tree_digest(assignment.root, skip=_NOT_GRADED)
+
+
+@functools.cache
+def engine_digest() -> str:
+    """SHA-256 over the engine's sources and the ``reference`` package's, if installed."""
+    digest = hashlib.sha256()
+    roots = [Path(autograder.__file__).resolve().parent]
+    spec = importlib.util.find_spec("reference")
+    if spec is not None and spec.submodule_search_locations:
+        roots += [Path(p).resolve() for p in spec.submodule_search_locations]
+    for root in roots:
+        digest.update(f"{root.name}:{_tree_digest(root, skip=frozenset({'__pycache__'}))}".encode())
+    return digest.hexdigest()
+
+
+def _tree_digest(root: Path, *, skip: frozenset[str]) -> str:
+    digest = hashlib.sha256()
+    for directory, subdirs, files in os.walk(root):
+        subdirs[:] = sorted(d for d in subdirs if d not in skip and not d.endswith(".egg-info"))
+        for name in sorted(files):
+            if name.endswith((".pyc", ".pyo")):
+                continue
+            path = Path(directory, name)
+            digest.update(str(path.relative_to(root)).encode() + b"\0")
+            digest.update(_file_sha256(path).encode())
+    return digest.hexdigest()
 
 
 class _Unreadable:
@@ -85,6 +146,7 @@ class Grader:
         self.assignment = assignment
         self.options = options or GradingOptions()
         self.policy = policy_for(assignment, self.options)
+        self._locked = locked_sources(assignment.notebook)
         self._slot = WorkerSlot(slot=slot)
 
     def __enter__(self) -> "Grader":
@@ -111,10 +173,10 @@ class Grader:
         sub_id = id or Path(path).stem
         raw_sha = _file_sha256(path)
         key = submission_key(raw_sha, self.assignment, self.options)
-        seed = int(hashlib.sha256((raw_sha + self.assignment.checks_digest).encode())
-                   .hexdigest()[:8], 16)
+        seed = submission_seed(self.assignment, sub_id)
         try:
-            notebook: Notebook | None = read_notebook(path, max_bytes=self.options.max_notebook_bytes)
+            notebook: Notebook | None = restore_locked(
+                read_notebook(path, max_bytes=self.options.max_notebook_bytes), self._locked)
             problem = ""
         except NotebookError as exc:
             notebook, problem = None, str(exc)
@@ -137,10 +199,12 @@ class Grader:
         cells = [(c.index, c.source) for c in notebook.cells]
         forbidden = forbidden_functions(self.assignment, [c.source for c in notebook.cells],
                                         [c.index for c in notebook.cells])
+        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
+        call_timeout = self.options.call_timeout or self.assignment.call_timeout
         session = StudentSession(
             slot=self._slot, cells=cells, data_files=self._data_files(), policy=self.policy,
-            notebook_timeout=self.options.notebook_timeout or self.assignment.notebook_timeout,
-            exclude=self._excluded_paths(out_dir))
+            notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
+            cpu_budget=self.options.cpu_budget or notebook_timeout + 20 * call_timeout)
         try:
             run = session.start()
             tests = self._run_checks(session, run.functions, forbidden, seed, out_dir)
@@ -150,6 +214,7 @@ class Grader:
                    "crashed" if run.crashed or run.crashed_cells else "graded")
         result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)
         return replace(result, stdout=run.stdout, notes=tuple(run.notes) + tuple(notebook.warnings),
+                       cpu_seconds=round(session.cpu_seconds, 3),
                        cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
                                          for c in run.cells if not c.ok))
 
@@ -161,13 +226,23 @@ class Grader:
             hidden_root=self.assignment.root / "checks" / "hidden",
             attachments=(out_dir / "images") if out_dir is not None else None)
         plugin = GradingPlugin(context)
-        run_pytest(self.check_files, self.assignment.root, plugin)
+        status = run_pytest(self.check_files, self.assignment.root, plugin)
+        if status == pytest.ExitCode.INTERRUPTED:
+            # Ctrl-C inside pytest is turned into an exit status: a partial run must
+            # never be stored as a graded result.
+            raise KeyboardInterrupt
         if not plugin.collection_errors and not plugin.results:
             plugin.collection_errors.append("no checks were collected")
         if plugin.collection_errors:
             raise AssignmentError(
                 f"The checks of assignment {self.assignment.name!r} could not be collected; "
                 "fix them before grading:\n" + "\n".join(plugin.collection_errors))
+        if status not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED) or \
+                len(plugin.results) != plugin.collected:
+            raise EngineError(
+                f"the check run ended early (pytest status {int(status)}, "
+                f"{len(plugin.results)} of {plugin.collected} checks recorded); nothing was "
+                "stored, and the submission is graded again on the next run")
         if out_dir is not None and plugin.instructor_log:
             out_dir.mkdir(parents=True, exist_ok=True)
             (out_dir / "grader.log").write_text("\n\n".join(plugin.instructor_log))
@@ -197,7 +272,9 @@ def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> i
     """
     helpers = rootdir / "checks" / "public"
     args = [str(f) for f in files] + ["-o", f"pythonpath={helpers}"] + [
-        "-c", os.devnull, "--rootdir", str(rootdir), "-p", "no:cacheprovider",
+        # --confcutdir: a conftest.py above the assignment is never imported into the grader.
+        "-c", os.devnull, "--rootdir", str(rootdir), "--confcutdir", str(rootdir),
+        "-p", "no:cacheprovider",
         "-p", "no:terminal", "-p", "no:stepwise", "-p", "no:unraisableexception",
         "-p", "no:threadexception", "-p", "no:pastebin", "-p", "no:junitxml", "-p", "no:doctest",
         "--assert=plain", "--import-mode=importlib",
@@ -282,5 +359,6 @@ def _file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "forbidden_functions",
-           "run_pytest", "submission_key", "summarise_run"]
+__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
+           "forbidden_functions", "run_pytest", "submission_key", "submission_seed",
+           "summarise_run"]

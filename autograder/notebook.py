@@ -40,7 +40,7 @@ import copy
 import hashlib
 import json
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +54,8 @@ __all__ = [
     "Notebook",
     "read_notebook",
     "code_sources",
+    "locked_sources",
+    "restore_locked",
     "MAX_NOTEBOOK_BYTES",
     "MAX_CODE_BYTES",
     "EMPTY_NOTEBOOK_MESSAGE",
@@ -450,3 +452,53 @@ def _schema_warning(summary: str) -> str:
 def _one_line(value: object, limit: int = 160) -> str:
     text = " ".join(str(value).split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# -- locked cells --------------------------------------------------------------
+
+def locked_sources(instructor: str | Path) -> dict[str, str]:
+    """``grade_id -> source`` of the instructor notebook's locked read-only code cells.
+
+    These are the cells nbgrader marks ``locked`` that are neither solution nor
+    test cells (helpers, imports, data loading): the release leaves their source
+    unchanged, so the instructor's copy is the released one. Test cells are left
+    out on purpose: their instructor version holds hidden tests.
+    """
+    nb = nbformat.read(str(instructor), as_version=4)
+    found: dict[str, str] = {}
+    for cell in nb.cells:
+        meta = cell.get("metadata", {}).get("nbgrader", {})
+        if (cell.get("cell_type") == "code" and meta.get("locked") and not meta.get("solution")
+                and not meta.get("grade") and isinstance(meta.get("grade_id"), str)):
+            found[meta["grade_id"]] = _source_text(cell.get("source", ""), 0)
+    return found
+
+
+def restore_locked(nb: Notebook, locked: dict[str, str]) -> Notebook:
+    """``nb`` with every locked cell's source put back as released (nbgrader's OverwriteCells).
+
+    A changed or missing locked cell is named in the notebook's warnings, which
+    the feedback page shows.
+    """
+    if not locked:
+        return nb
+    cells, changed = [], []
+    for cell in nb.cells:
+        original = locked.get(cell.grade_id or "")
+        if original is not None and original != cell.source:
+            changed.append(cell.grade_id or "")
+            cell = replace(cell, source=original)
+        cells.append(cell)
+    present = {cell.grade_id for cell in nb.cells}
+    missing = sorted(gid for gid in locked if gid not in present and locked[gid].strip())
+    warnings = list(nb.warnings)
+    if changed:
+        warnings.append(
+            "You changed read-only (locked) cell(s) " + ", ".join(f"`{g}`" for g in changed)
+            + "; they were graded as released, without your changes.")
+    if missing:
+        warnings.append(
+            "Read-only (locked) cell(s) " + ", ".join(f"`{g}`" for g in missing)
+            + " are missing from your notebook; functions they define may be missing too. "
+            "Start again from the released notebook if you deleted them.")
+    return replace(nb, cells=tuple(cells), warnings=tuple(warnings))

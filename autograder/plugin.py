@@ -21,6 +21,7 @@ from autograder.errors import (
     CheckFailure,
     ForbiddenUse,
     MissingFunction,
+    NotRun,
     PartialCredit,
     StudentError,
     StudentException,
@@ -35,6 +36,7 @@ _KINDS: tuple[tuple[type[BaseException], str], ...] = (
     (MissingFunction, "missing"),
     (StudentException, "exception"),
     (CallTimeout, "timeout"),
+    (NotRun, "not-run"),
     (UnsupportedValue, "unsupported"),
     (WorkerCrashed, "crashed"),
     (StudentError, "crashed"),
@@ -108,6 +110,8 @@ class GradingPlugin:
         self.results: list[CheckResult] = []
         self.collection_errors: list[str] = []
         self.instructor_log: list[str] = []
+        #: items pytest collected; every one must end with a recorded verdict
+        self.collected = 0
         self._log = CallLog()
         self._feedback: Feedback | None = None
         self._seen: set[str] = set()
@@ -115,6 +119,9 @@ class GradingPlugin:
     # -- configuration -----------------------------------------------------
     def pytest_configure(self, config: pytest.Config) -> None:
         config.addinivalue_line("markers", "points(n): points awarded by this check item")
+
+    def pytest_collection_finish(self, session: pytest.Session) -> None:
+        self.collected = len(session.items)
 
     def pytest_collectreport(self, report: pytest.CollectReport) -> None:
         if report.failed:
@@ -151,6 +158,8 @@ class GradingPlugin:
         self._log.names.clear()
         name, _ = check_name(item)
         self._feedback = Feedback(self.context.attachments, name)
+        if hasattr(self.context.target, "current_check"):  # for "not run, because ..." messages
+            self.context.target.current_check = f"`{name}`"
 
     @pytest.hookimpl(tryfirst=True)
     def pytest_runtest_makereport(self, item: pytest.Item, call: pytest.CallInfo[None]) -> pytest.TestReport:

@@ -42,6 +42,14 @@ key sets) stand for everything else:
     data gives when sent as an ordinary (escaped) dict.
 ``{"$t": "unsupported", "type": str, "repr": str, "reason": str}``
     a value that could not be encoded; decoded to :class:`Unsupported`.
+``{"$t": "fn", "id": str, "name": str, "safe": str}``
+    a reference to a function that stays on the side that sent it (``safe``
+    optional): a function a check passes to student code, or one the student
+    returns. Decoded to :class:`CallableRef`, plain data; each side turns refs
+    into its own calling objects (:mod:`autograder.callbacks` on the trusted
+    side, :mod:`autograder.worker.serve` in the worker), so no function's
+    code ever crosses. ``safe`` names a function of :data:`SAFE_FUNCTIONS`
+    that the worker may evaluate itself.
 
 Every buffer must be referenced exactly once. Depth counts nested containers
 (list, tuple, dict, figure); items count every value node.
@@ -94,6 +102,9 @@ __all__ = [
     "MAX_INT_DIGITS",
     "MAX_NDIM",
     "Unsupported",
+    "CallableRef",
+    "SAFE_FUNCTIONS",
+    "replace_refs",
     "encode",
     "encode_result",
     "decode",
@@ -124,6 +135,7 @@ HEADER_RESERVE_BYTES = 2**20
 Tree = Any
 Buffer = bytes | bytearray | memoryview
 FigureEncoder = Callable[[object], dict]
+CallableEncoder = Callable[[object], "CallableRef | None"]
 
 _JSON_INT_BITS = 1024  # larger ints use the "int" tag
 _JSON_INT_CHARS = 320  # a 1024-bit int has 309 digits; longer JSON numbers are rejected
@@ -178,6 +190,53 @@ class Unsupported:
     reason: str = ""
 
 
+#: Functions a check may let the worker evaluate itself, by name (pure, elementwise numpy
+#: ufuncs: no state, no I/O, no callbacks). The worker resolves each name in numpy itself.
+SAFE_FUNCTIONS = frozenset(f"numpy.{name}" for name in (
+    "sin", "cos", "tan", "arcsin", "arccos", "arctan", "sinh", "cosh", "tanh", "arcsinh",
+    "arccosh", "arctanh", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "sqrt",
+    "cbrt", "square", "absolute", "abs", "sign", "reciprocal", "floor", "ceil", "rint",
+    "negative", "positive", "sinc", "deg2rad", "rad2deg",
+))
+_REF_ID_RE = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class CallableRef:
+    """A function that stays on the side that sent it, as plain data.
+
+    ``id`` identifies it to its owner (the grader's callback registry, or the
+    worker's table of returned functions), ``name`` is for messages only and
+    ``safe`` (a name in :data:`SAFE_FUNCTIONS`, or ``""``) lets the worker
+    evaluate the function itself.
+    """
+
+    id: str
+    name: str = "f"
+    safe: str = ""
+
+
+def replace_refs(value: object, make: Callable[[CallableRef], object], _depth: int = 0) -> object:
+    """``value`` with every :class:`CallableRef` in it replaced by ``make(ref)``.
+
+    Walks only the exact containers :func:`decode` builds (list, tuple, dict);
+    containers holding no ref are returned as they are, not copied.
+    """
+    t = type(value)
+    if t is CallableRef:
+        return make(value)  # type: ignore[arg-type]
+    if _depth > MAX_DEPTH or t not in (list, tuple, dict):
+        return value
+    if t is dict:
+        items = value.items()  # type: ignore[attr-defined]
+        new = {k: replace_refs(v, make, _depth + 1) for k, v in items}
+        return value if all(new[k] is v for k, v in items) else new
+    new_items = [replace_refs(v, make, _depth + 1) for v in value]  # type: ignore[attr-defined]
+    if all(a is b for a, b in zip(new_items, value)):  # type: ignore[call-overload]
+        return value
+    return new_items if t is list else tuple(new_items)
+
+
 # --------------------------------------------------------------------------
 # encoding
 
@@ -189,6 +248,7 @@ def encode(
     max_items: int = MAX_ITEMS,
     figure_encoder: FigureEncoder | None = None,
     buffers: list[Buffer] | None = None,
+    callable_encoder: CallableEncoder | None = None,
 ) -> tuple[Tree, list[Buffer]]:
     """Encode ``value`` as ``(tree, buffers)``.
 
@@ -200,12 +260,15 @@ def encode(
     ``figure_encoder`` (worker side only) turns a matplotlib ``Figure`` (or an
     ``Axes``, through its figure) into figure data. ``buffers``, if given,
     receives the buffers (indices continue after its current length); on
-    error it is left as it was.
+    error it is left as it was. ``callable_encoder``, if given, is asked for a
+    :class:`CallableRef` for each callable that is not otherwise plain data
+    (it may return ``None`` to refuse); without it such values are unsupported.
     """
     bufs: list[Buffer] = [] if buffers is None else buffers
     start = len(bufs)
     encoder = _Encoder(
-        bufs, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder
+        bufs, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder,
+        callable_encoder=callable_encoder,
     )
     try:
         tree = encoder.encode(value, 0)
@@ -223,6 +286,7 @@ def encode_result(
     max_items: int = MAX_ITEMS - ENVELOPE_ITEMS,
     max_bytes: int = MAX_FRAME_BYTES - HEADER_RESERVE_BYTES,
     buffers: list[Buffer] | None = None,
+    callable_encoder: CallableEncoder | None = None,
 ) -> tuple[Tree, list[Buffer]]:
     """Encode a student's value for sending; never raises.
 
@@ -240,6 +304,7 @@ def encode_result(
             max_items=max_items,
             figure_encoder=figure_encoder,
             buffers=bufs,
+            callable_encoder=callable_encoder,
         )
     except ProtocolError as exc:
         return _unsupported(value, str(exc)), bufs
@@ -264,8 +329,10 @@ class _Encoder:
         max_depth: int,
         max_items: int,
         figure_encoder: FigureEncoder | None,
+        callable_encoder: CallableEncoder | None = None,
     ) -> None:
         self.buffers = buffers
+        self.callable_encoder = callable_encoder
         self.max_depth = max_depth
         self.max_items = max_items
         self.figure_encoder = figure_encoder
@@ -314,8 +381,15 @@ class _Encoder:
         if t is Unsupported:
             fields = {"type": _text(x.type), "repr": _text(x.repr), "reason": _text(x.reason)}
             return {"$t": "unsupported", **fields}
+        if t is CallableRef:
+            return _encode_ref(x)
         if _is_matplotlib(t):
             return self._matplotlib(x, t, depth)
+        if self.callable_encoder is not None and callable(x):  # callable(): no user code runs
+            ref = self.callable_encoder(x)
+            if type(ref) is CallableRef:
+                return _encode_ref(ref)
+            return _unsupported(x, "no more functions can be returned in this call")
         return _unsupported(x, _unsupported_reason(t))
 
     def _enter(self, depth: int, n: int) -> None:
@@ -380,6 +454,13 @@ class _Encoder:
     def _add_buffer(self, data: Buffer) -> int:
         self.buffers.append(data)
         return len(self.buffers) - 1
+
+
+def _encode_ref(ref: CallableRef) -> Tree:
+    node = {"$t": "fn", "id": _text(ref.id), "name": _text(ref.name)[:_MAX_REPR_CHARS]}
+    if ref.safe:
+        node["safe"] = _text(ref.safe)
+    return node
 
 
 def _encode_int(x: int) -> Tree:
@@ -492,7 +573,8 @@ def decode(
 
     Only ``None``, ``bool``, ``int``, ``float``, ``complex``, ``str``,
     ``bytes``, ``list``, ``tuple``, ``dict``, base-class ``ndarray`` (via
-    ``np.frombuffer(...).copy()``) and :class:`Unsupported` are ever built.
+    ``np.frombuffer(...).copy()``), :class:`Unsupported` and
+    :class:`CallableRef` are ever built.
     Figure nodes become plain dicts (with ``"$t": "figure"`` and ``"png"``
     as bytes). Raises :class:`ProtocolError` naming
     what was wrong for any malformed tree.
@@ -525,6 +607,7 @@ class _Decoder:
             "bytes": self._bytes,
             "figure": self._figure,
             "unsupported": self._unsupported,
+            "fn": self._ref,
         }
 
     def decode(self, node: Tree, depth: int) -> object:
@@ -656,6 +739,17 @@ class _Decoder:
                 raise ProtocolError(f"'unsupported' field {k!r} must be a str")
             _check_str(v, f"'unsupported' field {k!r}")
         return Unsupported(**fields)
+
+    def _ref(self, node: dict, depth: int) -> CallableRef:
+        _expect_keys(node, {"id", "name"}, optional={"safe"})
+        ref_id, name, safe = node["id"], node["name"], node.get("safe", "")
+        if type(ref_id) is not str or not _REF_ID_RE.fullmatch(ref_id):
+            raise ProtocolError("'fn' id must be 1 to 64 letters, digits or _.:-")
+        if type(name) is not str or len(name) > _MAX_REPR_CHARS:
+            raise ProtocolError(f"'fn' name must be a str of at most {_MAX_REPR_CHARS} characters")
+        if type(safe) is not str or (safe and safe not in SAFE_FUNCTIONS):
+            raise ProtocolError(f"'fn' safe name {_short(safe)} is not one of SAFE_FUNCTIONS")
+        return CallableRef(ref_id, name, safe)
 
     def _take(self, index: object) -> memoryview:
         if type(index) is not int or not 0 <= index < len(self.buffers):
@@ -825,6 +919,7 @@ def send_message(
     max_depth: int = MAX_DEPTH,
     max_items: int = MAX_ITEMS,
     max_bytes: int = MAX_FRAME_BYTES,
+    callable_encoder: CallableEncoder | None = None,
 ) -> int:
     """Encode ``obj`` (see :func:`encode`) and send it as one frame; return the frame size.
 
@@ -832,7 +927,8 @@ def send_message(
     limit.
     """
     tree, buffers = encode(
-        obj, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder
+        obj, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder,
+        callable_encoder=callable_encoder,
     )
     return send_frame(sock, tree, buffers, max_bytes=max_bytes)
 

@@ -36,7 +36,7 @@ class CheckResult:
     max_score: float
     output: str
     hidden: bool
-    kind: str = "ok"  # ok | wrong | partial | exception | missing | timeout | unsupported | crashed | forbidden | check-error
+    kind: str = "ok"  # ok | wrong | partial | exception | missing | timeout | not-run | unsupported | crashed | forbidden | check-error
     dataset: str | None = None
     attachments: tuple[Attachment, ...] = ()
 
@@ -103,6 +103,8 @@ class SubmissionResult:
     stdout: str = ""
     notes: tuple[str, ...] = ()
     engine: str = ""
+    #: CPU seconds the student's code used (notebook and calls)
+    cpu_seconds: float = 0.0
     max_score_declared: float | None = field(default=None, compare=False)
 
     @property
@@ -131,6 +133,7 @@ class SubmissionResult:
                 "id": self.id, "source": self.source, "assignment": self.assignment,
                 "key": self.key, "sha256": self.sha256, "outcome": self.outcome,
                 "seed": self.seed, "engine": self.engine, "notes": list(self.notes),
+                "cpu_seconds": self.cpu_seconds,
                 "cell_errors": [c.to_dict() for c in self.cell_errors],
                 "stdout": self.stdout,
             },
@@ -147,5 +150,6 @@ class SubmissionResult:
             execution_time=float(data.get("execution_time", 0.0)), seed=int(extra.get("seed", 0)),
             cell_errors=tuple(CellError(**c) for c in extra.get("cell_errors", [])),
             stdout=extra.get("stdout", ""), notes=tuple(extra.get("notes", [])),
-            engine=extra.get("engine", ""), max_score_declared=float(data.get("max_score", 0.0)),
+            engine=extra.get("engine", ""), cpu_seconds=float(extra.get("cpu_seconds", 0.0)),
+            max_score_declared=float(data.get("max_score", 0.0)),
         )

@@ -14,6 +14,12 @@ which, in this order:
    system directories, full access to the working directory only, no TCP bind or
    connect, no signals or abstract UNIX sockets outside the sandbox.
 
+Steps of :mod:`autograder.syscalls` come in between: right after the new session,
+private IPC, UTS and mount namespaces (as an ordinary user inside a user namespace)
+with a size-limited tmpfs over the working directory; just before Landlock, a
+seccomp filter (no new socket of any family, no keyrings, memfd or io_uring; no
+System V IPC where there is no IPC namespace).
+
 Why this is written by hand: tools such as bubblewrap, nsjail or firejail start a
 *new program*, which would throw away the warm interpreter and its imported modules;
 here every step must be applied in-process to a forked Python child. ``landlockpy``
@@ -49,6 +55,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from autograder import cgroups, syscalls
 from autograder.errors import UsageError
 
 try:  # Landlock is Linux-only; elsewhere the sandbox notes its absence.
@@ -143,6 +150,9 @@ class Limits:
         Largest file the child may write (``RLIMIT_FSIZE``).
     output_bytes : int
         Cap on captured stdout/stderr, enforced by the worker, not here.
+    disk_bytes : int
+        Total size of the files in the working directory (the size of the tmpfs
+        mounted over it; needs a mount namespace, see :mod:`autograder.syscalls`).
     """
 
     memory_bytes: int = 4 * GIB
@@ -151,10 +161,11 @@ class Limits:
     open_files: int = 256
     file_size_bytes: int = 64 * MIB
     output_bytes: int = 1 * MIB
+    disk_bytes: int = 256 * MIB
 
     def __post_init__(self) -> None:
         for name in ("memory_bytes", "cpu_seconds", "processes", "open_files",
-                     "file_size_bytes", "output_bytes"):
+                     "file_size_bytes", "output_bytes", "disk_bytes"):
             _require_positive_int(f"limits.{name}", getattr(self, name))
 
 
@@ -177,6 +188,14 @@ class IsolationPolicy:
         concurrent children never share an ``RLIMIT_NPROC`` count.
     allowed_read : tuple of str
         Extra read-only paths (for example a shared data set).
+    namespaces : bool
+        Private IPC, UTS and mount namespaces and the disk quota (as an ordinary
+        user, inside a user namespace when the kernel allows one).
+    seccomp : bool
+        Load the seccomp filter of :func:`autograder.syscalls.install_filter`.
+    cgroup : bool
+        As root, move the child into its slot's cgroup (equal CPU weight per slot,
+        ``pids.max``, a kill that re-forking cannot dodge; see :mod:`autograder.cgroups`).
     """
 
     limits: Limits = field(default_factory=Limits)
@@ -185,13 +204,17 @@ class IsolationPolicy:
     drop_user: bool = True
     base_uid: int = 61000
     allowed_read: tuple[str, ...] = ()
+    namespaces: bool = True
+    seccomp: bool = True
+    cgroup: bool = True
 
     def __post_init__(self) -> None:
         if not isinstance(self.limits, Limits):
             raise UsageError(
                 f"`policy.limits` must be a `Limits`; got {type(self.limits).__name__}."
             )
-        for name in ("landlock", "network_namespace", "drop_user"):
+        for name in ("landlock", "network_namespace", "drop_user", "namespaces", "seccomp",
+                     "cgroup"):
             if not isinstance(getattr(self, name), bool):
                 value = getattr(self, name)
                 raise UsageError(f"`policy.{name}` must be True or False; got {value!r}.")
@@ -226,12 +249,20 @@ class IsolationSupport:
         Whether a child could create a network namespace.
     notes : tuple of str
         One sentence per missing protection, for the grader's log.
+    user_namespaces : bool
+        Whether a child may create a user namespace (always True for root); an
+        ordinary user gets IPC, mount and network namespaces and the disk quota
+        only through one.
+    seccomp : bool
+        Whether libseccomp is available to build the system-call filter.
     """
 
     landlock_abi: int
     is_root: bool
     can_unshare_net: bool
     notes: tuple[str, ...]
+    user_namespaces: bool = False
+    seccomp: bool = False
 
 
 @functools.cache
@@ -248,7 +279,24 @@ def probe_support() -> IsolationSupport:
     abi = _landlock_abi()
     is_root = os.geteuid() == 0
     can_unshare = _try_in_child(lambda: _unshare(CLONE_NEWNET))
-    return IsolationSupport(abi, is_root, can_unshare, _support_notes(abi, is_root, can_unshare))
+    userns = syscalls.user_namespaces_allowed()
+    seccomp = syscalls.pyseccomp is not None
+    notes = _support_notes(abi, is_root, can_unshare) + _syscall_notes(is_root, userns, seccomp)
+    return IsolationSupport(abi, is_root, can_unshare, notes, userns, seccomp)
+
+
+def _syscall_notes(is_root: bool, userns: bool, seccomp: bool) -> tuple[str, ...]:
+    notes = []
+    if not seccomp:
+        notes.append("libseccomp is missing (Debian: libseccomp2): new sockets of other "
+                     "families than TCP, keyrings and memfd files are not blocked.")
+    if not is_root and not userns:
+        notes.append("User namespaces are refused for this user: no IPC or mount namespace "
+                     "(System V IPC is blocked by seccomp instead) and no total disk quota.")
+    cgroup_note = cgroups.cgroup_support()
+    if not cgroup_note.startswith("cgroup v"):
+        notes.append(cgroup_note)
+    return tuple(notes)
 
 
 def _landlock_abi() -> int:
@@ -398,17 +446,34 @@ def _readable_paths_cached(exclude: tuple[str, ...], extra: tuple[str, ...]) -> 
 
 
 def _candidate_roots(extra: Sequence[Path]) -> list[Path]:
-    """The Python installation, the existing sys.path directories and the system roots."""
+    """What Python needs, wherever it lies: the installation, its site-packages, the system.
+
+    Only directories that belong to the interpreter are taken from ``sys.path``
+    (site-packages and anything inside the installation or the venv); the current
+    folder, a course folder or a repository on the grader's path are not, since
+    they may hold other students' files, checks or model solutions.
+    """
     paths = sysconfig.get_paths()
-    python = [sys.prefix, sys.base_prefix, sys.exec_prefix, paths["stdlib"],
-              paths["platstdlib"], paths["purelib"], paths["platlib"]]
-    on_path = [entry for entry in sys.path if entry and os.path.isabs(entry)]
-    return [_resolve(p) for p in [*python, *on_path, *SYSTEM_READ_ROOTS, *extra]]
+    python = [sys.prefix, sys.base_prefix, sys.exec_prefix, sys.base_exec_prefix,
+              paths["stdlib"], paths["platstdlib"], paths["purelib"], paths["platlib"],
+              os.path.dirname(os.path.realpath(sys.executable))]
+    installs = [_resolve(p) for p in python]
+    on_path = [Path(entry) for entry in sys.path if entry and os.path.isabs(entry)]
+    site_dirs = [path for path in on_path
+                 if path.name in ("site-packages", "dist-packages")
+                 or any(_inside(_resolve(path), {root}) for root in installs)]
+    return [_resolve(p) for p in [*installs, *_site_packages_dirs(), *site_dirs,
+                                  *SYSTEM_READ_ROOTS, *extra]]
 
 
 def _allowed_beneath(root: Path, holes: set[Path], seen: set[Path]) -> Iterator[Path]:
-    """Yield ``root`` if it holds no hole, else its entries that hold none (recursively)."""
-    if root in seen or _inside(root, holes):
+    """Yield ``root`` if it holds no hole, else its entries that hold none (recursively).
+
+    A hole *around* a root does not take the root away: a venv inside the
+    repository (``.venv``), or under ``/autograder`` next to the results, stays
+    readable while the rest of the repository or results folder does not.
+    """
+    if root in seen or root in holes:
         return
     seen.add(root)
     inner = {hole for hole in holes if root in hole.parents}
@@ -540,14 +605,54 @@ def enter_sandbox(
     workdir = _check_arguments(policy, workdir, slot)
     notes: list[str] = []
     _attempt(notes, "new session", os.setsid)
+    private_ipc = _apply_namespaces(policy, workdir, notes)
     notes.append(_replace_environment(clean_environment(workdir)))
     os.chdir(workdir)
     ruleset = _prepare_landlock(policy, workdir, exclude, notes)
     notes.append(_apply_limits(policy.limits, _process_allowance(policy)))
+    _join_cgroup(policy, slot, notes)
     _apply_identity(policy, workdir, policy.base_uid + slot, notes)
+    if policy.seccomp:
+        _attempt(notes, "seccomp", lambda: syscalls.install_filter(block_sysv_ipc=not private_ipc))
+    else:
+        notes.append("seccomp off by policy")
     if ruleset is not None:
         _attempt(notes, "landlock", lambda: _restrict(ruleset))
     return tuple(notes)
+
+
+def _apply_namespaces(policy: IsolationPolicy, workdir: Path, notes: list[str]) -> bool:
+    """Private IPC/UTS/mount namespaces and the disk quota; True if IPC is private.
+
+    An ordinary user also gets an empty network namespace here, inside the same
+    user namespace (root gets one in :func:`_apply_identity`).
+    """
+    if not policy.namespaces:
+        notes.append("IPC/mount namespaces and disk quota off by policy")
+        return False
+    result = syscalls.private_namespaces(
+        workdir, quota_bytes=policy.limits.disk_bytes,
+        network=policy.network_namespace and os.geteuid() != 0)
+    notes.extend(result.notes)
+    return result.ipc
+
+
+def _join_cgroup(policy: IsolationPolicy, slot: int, notes: list[str]) -> None:
+    """As root, enter the slot's cgroup (before the user switch: it needs root)."""
+    if not policy.cgroup or os.geteuid() != 0:
+        notes.append("slot cgroup " + ("off by policy" if not policy.cgroup
+                                       else "skipped: not running as root"))
+        return
+    group = cgroups.slot_cgroup(slot, processes=policy.limits.processes)
+    if group is None:
+        notes.append("slot cgroup skipped: no usable cgroup hierarchy")
+        return
+    _attempt(notes, "slot cgroup", lambda: _join(group))
+
+
+def _join(group: cgroups.SlotCgroup) -> str:
+    group.join()
+    return f"slot cgroup v{group.version}: {', '.join(str(d) for d in group.dirs)}"
 
 
 def _check_arguments(policy: IsolationPolicy, workdir: Path, slot: int) -> Path:

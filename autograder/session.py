@@ -11,22 +11,29 @@ from __future__ import annotations
 
 import fcntl
 import os
+import select
 import shutil
 import signal
 import socket
+import stat
 import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
-from autograder import protocol
+import numpy as np
+
+from autograder import cgroups, protocol
+from autograder.cputime import CpuClock
 from autograder.errors import (
     AutograderError,
     CallTimeout,
+    EngineError,
     MissingFunction,
+    NotRun,
     StudentError,
     StudentException,
     UnsupportedValue,
@@ -40,8 +47,33 @@ STARTUP_TIMEOUT = 120.0
 MAX_RESTARTS = 2
 #: how many times a submission's worker is restarted after a call hung or killed it
 MAX_CALL_RESTARTS = 8
-#: after this many hangs or crashes, a function is not called again for this submission
+#: after this many crashes, a function is not called again for this submission
 MAX_STRIKES = 2
+#: time limits count CPU seconds; code that sleeps or blocks is stopped by a wall-clock
+#: backstop of ``WALL_FACTOR * limit + WALL_SLACK`` seconds, generous enough that a
+#: loaded machine never reaches it with code that computes
+WALL_FACTOR = 4.0
+WALL_SLACK = 15.0
+#: shortest wait between two readings of the CPU clock while a call runs
+MIN_POLL = 0.05
+
+
+def wall_backstop(cpu_limit: float) -> float:
+    """Wall-clock seconds after which code that is not computing is stopped."""
+    return WALL_FACTOR * cpu_limit + WALL_SLACK
+
+
+def payload_size(value: Any, _depth: int = 0) -> int:
+    """How many numbers a call's arguments hold: the "input size" of a call."""
+    if _depth > 32:
+        return 1
+    if isinstance(value, np.ndarray):
+        return int(value.size)
+    if isinstance(value, dict):
+        return sum(payload_size(v, _depth + 1) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return sum(payload_size(v, _depth + 1) for v in value)
+    return 1
 
 
 @dataclass(frozen=True)
@@ -68,33 +100,75 @@ class RunReport:
     crashed_cells: tuple[int, ...] = ()
     crashed: bool = False
     notes: tuple[str, ...] = ()
+    cpu_seconds: float = 0.0
 
 
-#: where slots are claimed (one lock file per sandbox user), shared by every grader here
-SLOT_LOCKS = Path(tempfile.gettempdir()) / "autograder-slots"
+#: where root graders claim slots (one lock file per sandbox user id): under /run, which
+#: only root may write, so no other user can plant the folder or its files beforehand
+ROOT_SLOT_LOCKS = Path("/run/autograder-slots")
 MAX_SLOTS = 1000
 
 
-def claim_slot(first: int = 0) -> tuple[int, int]:
-    """Claim a slot number no other grader on this machine holds; return (slot, lock fd).
+def slot_lock_dir() -> Path:
+    """The folder of slot locks for this grader's user.
 
-    The slot picks the sandbox's user id (``base_uid + slot``), and the grader kills
-    every process of that user after each submission, so two graders running at the
-    same time (two courses, two CI jobs) must never share one. An exclusive
-    ``flock`` held for the slot's lifetime guarantees that, and the kernel releases
-    it if the grader dies.
+    Root graders share one folder, because their slots pick sandbox user ids that
+    must never be used by two graders at once. An ordinary user's children run as
+    that user, so its graders share a folder of their own
+    (``$TMPDIR/autograder-slots-<uid>``): root's folder never locks them out, and
+    theirs never blocks root.
     """
-    SLOT_LOCKS.mkdir(mode=0o700, exist_ok=True)
+    uid = os.geteuid()
+    if uid == 0 and ROOT_SLOT_LOCKS.parent.is_dir():
+        return ROOT_SLOT_LOCKS
+    return Path(tempfile.gettempdir()) / f"autograder-slots-{uid}"
+
+
+def _private_folder(path: Path) -> Path:
+    """Create ``path`` (mode 700) or check that the existing one is ours and private.
+
+    A folder another user made in a shared ``/tmp`` (or a link in its place) could
+    hold links to other files or lock us out; it is refused with a clear message.
+    """
+    try:
+        path.mkdir(mode=0o700)
+    except FileExistsError:
+        pass
+    info = os.lstat(path)
+    if not stat.S_ISDIR(info.st_mode) or info.st_uid != os.geteuid() or info.st_mode & 0o077:
+        raise AutograderError(
+            f"the slot lock folder {path} is not a private folder of this user (owner uid "
+            f"{info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}); remove it, or set TMPDIR "
+            "to a folder of your own, and start the grader again.")
+    return path
+
+
+def claim_slot(first: int = 0) -> tuple[int, int]:
+    """Claim a slot number no other grader of this user holds; return (slot, lock fd).
+
+    As root, the slot picks the sandbox's user id (``base_uid + slot``) and cgroup,
+    and the grader kills every process of that user after each submission, so two
+    graders running at the same time (two courses, two CI jobs) must never share
+    one. An exclusive ``flock`` held for the slot's lifetime guarantees that, and the
+    kernel releases it if the grader dies. Lock files are opened without following
+    links.
+    """
+    folder = _private_folder(slot_lock_dir())
     for slot in range(first, first + MAX_SLOTS):
-        fd = os.open(SLOT_LOCKS / f"{slot}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+        fd = os.open(folder / f"{slot}.lock",
+                     os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             os.close(fd)
             continue
         return slot, fd
-    raise AutograderError(f"all {MAX_SLOTS} worker slots in {SLOT_LOCKS} are taken; "
+    raise AutograderError(f"all {MAX_SLOTS} worker slots in {folder} are taken; "
                           "is another grader stuck?")
+
+
+#: the most characters of captured output the grader keeps from the worker
+OUTPUT_CAP = 1 << 20
 
 
 def _cell_report(data: Any) -> CellReport:
@@ -169,12 +243,19 @@ class WorkerSlot:
                 theirs.close()
         raise AssertionError("unreachable")
 
+    @property
+    def warm_parent(self) -> int | None:
+        """Pid of the running warm parent (the subreaper of every child), if any."""
+        return self._proc.pid if self._proc is not None and self._proc.poll() is None else None
+
     def close(self) -> None:
         if self._control is not None:
             self._control.close()
             self._control = None
         if self._proc is not None:
             if self._proc.poll() is None:
+                if os.geteuid() != 0:  # orphans it adopted would go to init with it
+                    kill_descendants(self._proc.pid)
                 self._proc.kill()
             self._proc.wait()
             if self._proc.stderr is not None:
@@ -204,32 +285,125 @@ def kill_group(pid: int) -> None:
             pass
 
 
-def kill_user(uid: int) -> None:
+def kill_user(uid: int) -> bool:
     """Kill every process running as ``uid`` (the slot's own unprivileged user).
 
     A student's process can leave its process group with ``setsid``; it cannot
-    leave its user, so this sweeps up whatever ``kill_group`` missed.
+    leave its user. A helper forked from the grader becomes ``uid`` and calls
+    ``kill(-1, SIGKILL)``: the kernel signals every process of that user in one pass
+    under the task-list lock, and a process with a pending SIGKILL cannot fork, so
+    a process that re-forks faster than a sweep through ``/proc`` is caught too.
+    Repeated until no live process of ``uid`` is left (zombies count for ``kill``
+    until their parent reaps them, so they are left out). Returns True when none is.
     """
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
+    for _ in range(KILL_ROUNDS):
+        pid = os.fork()
+        if pid == 0:  # only system calls here: the grader may have threads
+            code = 2
+            try:
+                os.setresuid(uid, uid, uid)
+                os.kill(-1, signal.SIGKILL)
+                code = 0
+            except ProcessLookupError:
+                code = 1  # nothing left to signal
+            finally:
+                os._exit(code)
+        _, status = os.waitpid(pid, 0)
+        if not os.WIFEXITED(status) or os.WEXITSTATUS(status) not in (0, 1):
+            return False  # the helper could not become ``uid``
+        if os.WEXITSTATUS(status) == 1 or not _live_processes(uid):
+            return True
+        time.sleep(0.002)  # let the killed exit
+    return not _live_processes(uid)
+
+
+def _live_processes(uid: int) -> list[int]:
+    """Processes of ``uid`` that are not zombies."""
+    found = []
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
             continue
         try:
-            status = (entry / "status").read_text()
+            info = os.stat(f"/proc/{name}")
+            with open(f"/proc/{name}/stat", "rb") as handle:
+                state = handle.read().rsplit(b")", 1)[1].split()[0]
         except OSError:
             continue
-        for line in status.splitlines():
-            if line.startswith("Uid:"):
-                if int(line.split()[1]) == uid:
-                    try:
-                        os.kill(int(entry.name), signal.SIGKILL)
-                    except OSError:
-                        pass
-                break
+        if info.st_uid == uid and state != b"Z":
+            found.append(int(name))
+    return found
+
+
+def kill_descendants(root: int) -> bool:
+    """Kill every descendant of ``root`` (the warm parent), round after round.
+
+    For a grader that is not root (no user of the slot's own, no cgroup): the warm
+    parent is a child subreaper, so a process whose parent died is re-parented to
+    it rather than to init, and the whole tree stays below it. Each round kills
+    what it finds; a killed process cannot fork again, so the rounds end.
+    Returns True when none is left.
+    """
+    for _ in range(KILL_ROUNDS):
+        found = _descendants(root)
+        if not found:
+            return True
+        for pid in found:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        time.sleep(0.002)
+    return not _descendants(root)
+
+
+def _descendants(root: int) -> set[int]:
+    parents: dict[int, int] = {}
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", "rb") as handle:
+                fields = handle.read().rsplit(b")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[0] != b"Z":  # zombies are dead already; their parent reaps them
+            parents[int(name)] = int(fields[1])
+    found: set[int] = set()
+    frontier = {root}
+    while frontier:
+        frontier = {pid for pid, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+#: rounds of killing before a sweep gives up (each round waits a few milliseconds)
+KILL_ROUNDS = 500
+
+
+def sweep_slot(policy: IsolationPolicy, slot: int, warm_parent: int | None) -> None:
+    """After a child is killed: make sure nothing it started is left on the slot.
+
+    Root: the slot's cgroup (frozen, then killed), then the slot's user. An
+    ordinary user: every descendant of the warm parent.
+    """
+    if os.geteuid() == 0:
+        group = cgroups.slot_cgroup(slot, processes=policy.limits.processes, create=False)
+        if policy.cgroup and group is not None:
+            group.kill_all()
+        if policy.drop_user:
+            kill_user(policy.base_uid + slot)
+    elif warm_parent is not None:
+        kill_descendants(warm_parent)
 
 
 @dataclass
 class StudentSession:
-    """One submission's sandboxed worker: run its cells, then answer calls."""
+    """One submission's sandboxed worker: run its cells, then answer calls.
+
+    Time limits are CPU seconds of the child's session (see :mod:`autograder.cputime`),
+    with a wall-clock backstop for code that sleeps or blocks, so a verdict never
+    depends on how busy the machine is.
+    """
 
     slot: WorkerSlot
     cells: Sequence[tuple[int, str]]
@@ -237,13 +411,23 @@ class StudentSession:
     policy: IsolationPolicy
     notebook_timeout: float
     exclude: Sequence[Path] = ()
+    #: CPU seconds the whole submission may use (notebook, restarts and calls)
+    cpu_budget: float | None = None
     restarts: int = 0
     skip: dict[int, str] = field(default_factory=dict)
-    #: per function: how often a call hung or ended the worker, and the last such error
+    #: per function: how often a call crashed the worker, and the last such error
     strikes: dict[str, tuple[int, StudentError]] = field(default_factory=dict)
+    #: per function: the smallest input size on which it ran out of time, and where
+    timed_out: dict[str, tuple[int, str]] = field(default_factory=dict)
+    #: answers a callback request from the worker (set by whoever passes callables)
+    on_callback: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    #: the check being run, for "not run, because ... on <check>" messages
+    current_check: str = ""
+    cpu_seconds: float = 0.0
     _pid: int | None = None
     _sock: socket.socket | None = None
     _workdir: Path | None = None
+    _clock: CpuClock | None = None
     report: RunReport | None = None
 
     # -- lifecycle -------------------------------------------------------
@@ -270,37 +454,59 @@ class StudentSession:
             functions=tuple(functions), seconds=time.perf_counter() - begin,
             timed_out_cells=tuple(sorted(i for i, s in self.skip.items() if s == "timeout")),
             crashed_cells=tuple(sorted(i for i, s in self.skip.items() if s == "crash")),
-            crashed=self._pid is None, notes=tuple(notes))
+            crashed=self._pid is None, notes=tuple(notes), cpu_seconds=self.cpu_seconds)
         return self.report
 
     def _run_once(self, notes: list[str]) -> tuple[str, int | None, Any]:
         """Run the cells once: ("ready", None, data), or ("timeout"|"crash", cell, None)."""
         self._spawn()
-        deadline = time.monotonic() + self.notebook_timeout
+        started = False
         current: int | None = None
-        while True:
-            try:
-                message = self._recv(deadline)
-            except TimeoutError:
-                self._kill()
-                return "timeout", current, None
-            except (EOFError, OSError, protocol.ProtocolError):
-                self._kill()
-                return "crash", current, None
-            if not isinstance(message, dict):
-                continue
-            try:  # the child is untrusted: a malformed message counts as a crash
-                if message.get("op") == "started":
-                    notes[:] = [str(n) for n in message.get("notes", [])]
-                elif message.get("op") == "cell":
-                    current = int(message["index"])
-                elif message.get("op") == "ready":
-                    return "ready", None, ([_cell_report(c) for c in message["cells"]],
-                                           str(message.get("stdout", "")),
-                                           [str(f) for f in message.get("functions", [])])
-            except (KeyError, TypeError, ValueError):
-                self._kill()
-                return "crash", current, None
+        assert self._clock is not None
+        self._clock.start()
+        spent: float | None = None
+        wall_deadline = time.monotonic() + wall_backstop(self.notebook_timeout)
+        try:
+            while True:
+                try:
+                    message = self._await(self.notebook_timeout, wall_deadline)
+                except TimeoutError:
+                    spent = self._clock.used()
+                    self._kill()
+                    return "timeout", current, None
+                except (EOFError, OSError, protocol.ProtocolError) as exc:
+                    self._kill()
+                    if not started:  # the engine's own set-up failed, not the student
+                        raise EngineError(
+                            "the sandboxed worker stopped before running any cell "
+                            f"({type(exc).__name__}); see the grader's log") from None
+                    return "crash", current, None
+                if not isinstance(message, dict):
+                    continue
+                try:  # the child is untrusted: a malformed message counts as a crash
+                    op = message.get("op")
+                    if op == "sandbox-broken":
+                        self._kill()
+                        raise EngineError(
+                            "the sandbox is incomplete: the worker cannot read "
+                            f"{str(message.get('path', '?'))[:300]} "
+                            f"({str(message.get('error', ''))[:200]}). Grading stopped, so no "
+                            "student gets a wrong zero; report this with the grader's "
+                            "install layout (where Python and its packages live).")
+                    if op == "started":
+                        started = True
+                        notes[:] = [str(n)[:500] for n in message.get("notes", [])][:64]
+                    elif op == "cell":
+                        current = int(message["index"])
+                    elif op == "ready":
+                        return "ready", None, ([_cell_report(c) for c in message["cells"]],
+                                               str(message.get("stdout", ""))[:OUTPUT_CAP],
+                                               [str(f)[:200] for f in message.get("functions", [])])
+                except (KeyError, TypeError, ValueError):
+                    self._kill()
+                    return "crash", current, None
+        finally:
+            self.cpu_seconds += spent if spent is not None else self._clock.own()
 
     def _spawn(self) -> None:
         self._kill()
@@ -316,20 +522,31 @@ class StudentSession:
             "cells": [[i, s] for i, s in self.cells if i not in self.skip],
         }
         self._pid, self._sock = self.slot.spawn(request)
+        self._clock = CpuClock(self._pid)
 
-    def _recv(self, deadline: float) -> Any:
-        if self._sock is None:
+    def _await(self, cpu_limit: float, wall_deadline: float) -> Any:
+        """The child's next message; TimeoutError once it used ``cpu_limit`` CPU seconds
+        (since the clock's start) or the wall-clock backstop passed."""
+        if self._sock is None or self._clock is None:
             raise EOFError("no worker")
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
-            raise TimeoutError
-        return protocol.recv_message(self._sock, timeout=remaining)
+        used = 0.0
+        while True:
+            wall_left = wall_deadline - time.monotonic()
+            if used >= cpu_limit or wall_left <= 0:
+                raise TimeoutError
+            # CPU time cannot grow faster than wall time times the cores the child may use.
+            wait = min(wall_left, max(MIN_POLL, (cpu_limit - used) / (os.cpu_count() or 1)))
+            readable, _, _ = select.select([self._sock], [], [], wait)
+            if readable:
+                # A frame has started: the child may still stall inside it, so the
+                # wall-clock backstop bounds the rest of the read.
+                return protocol.recv_message(self._sock, timeout=max(wall_left, 1.0))
+            used = self._clock.used()
 
     def _kill(self) -> None:
         if self._pid is not None:
             kill_group(self._pid)
-            if self.policy.drop_user and os.geteuid() == 0:
-                kill_user(self.policy.base_uid + self.slot.slot)
+            sweep_slot(self.policy, self.slot.slot, self.slot.warm_parent)
         if self._sock is not None:
             self._sock.close()
             self._sock = None
@@ -347,8 +564,18 @@ class StudentSession:
         self._pid = None
 
     # -- calls -------------------------------------------------------------
+    def _budget_left(self) -> float:
+        return float("inf") if self.cpu_budget is None else self.cpu_budget - self.cpu_seconds
+
     def request(self, message: dict[str, Any], *, timeout: float, what: str) -> dict[str, Any]:
-        """Send ``message`` and return the answer, or raise a :class:`StudentError`."""
+        """Send ``message`` and return the answer, or raise a :class:`StudentError`.
+
+        ``timeout`` is in CPU seconds. Callback requests from the worker (a student
+        function calling a function a check passed) are answered in between.
+        """
+        if self._budget_left() <= 0:
+            raise NotRun(f"{what} was not run: your submission used its whole time budget "
+                         f"({self.cpu_budget:g} s of CPU) on earlier cells and calls.")
         if self._sock is None:
             if self.report is None or self.report.crashed or self.restarts >= MAX_CALL_RESTARTS:
                 raise WorkerCrashed(
@@ -359,15 +586,30 @@ class StudentSession:
             if status != "ready":
                 self._kill()
                 raise WorkerCrashed(f"{what} could not run: restarting your notebook failed.")
-        assert self._sock is not None
+        assert self._sock is not None and self._clock is not None
+        limit = min(timeout, self._budget_left())
+        spent: float | None = None
+        self._clock.start()
+        wall_deadline = time.monotonic() + wall_backstop(limit)
         try:
             protocol.send_message(self._sock, message)
-            answer = protocol.recv_message(self._sock, timeout=timeout)
+            while True:
+                answer = self._await(limit, wall_deadline)
+                if not (isinstance(answer, dict) and answer.get("op") == "callback"):
+                    break
+                reply = (self.on_callback(answer) if self.on_callback is not None else
+                         {"op": "callback-result", "ok": False, "error": "no callbacks"})
+                protocol.send_message(self._sock, reply)
         except TimeoutError:
+            used = spent = self._clock.used()
             self._kill()
+            if used >= limit:
+                raise CallTimeout(
+                    f"{what} used more than {limit:g} s of CPU time; look for a loop that "
+                    "never ends or work that grows too fast with the input size.") from None
             raise CallTimeout(
-                f"{what} did not return within {timeout:g} s; look for a loop that never "
-                "ends or work that grows too fast with the input size.") from None
+                f"{what} did not return within {wall_backstop(limit):g} s although it used "
+                f"only {used:.1f} s of CPU: it was waiting (sleep, input, a lock, a pipe).") from None
         except protocol.ProtocolError as exc:
             self._kill()
             raise UnsupportedValue(
@@ -378,6 +620,8 @@ class StudentSession:
             raise WorkerCrashed(
                 f"{what} ended the worker process (it exited, was killed by a memory or "
                 f"CPU limit, or crashed): {type(exc).__name__}.") from None
+        finally:
+            self.cpu_seconds += spent if spent is not None else self._clock.own()
         if not isinstance(answer, dict):
             self._kill()
             raise WorkerCrashed(f"{what}: the worker sent a malformed answer.")
@@ -387,17 +631,25 @@ class StudentSession:
              timeout: float, figures: bool = False) -> tuple[Any, list[Any]]:
         """Call the student's ``name(*args, **kwargs)``; return (value, figures)."""
         what = f"{name}()"
+        size = payload_size([list(args), kwargs])
+        if name in self.timed_out and size >= self.timed_out[name][0]:
+            raise NotRun(f"{what} was not run on this input, because `{name}` ran out of "
+                         f"time on {self.timed_out[name][1]}, an input at least as small.")
         count, earlier = self.strikes.get(name, (0, None))
         if earlier is not None and count >= MAX_STRIKES:
-            # A function that hung (or crashed) twice would cost a full time limit and a
-            # restart on every remaining check, starving the other functions' checks.
-            raise type(earlier)(f"{earlier} (it did so {count} times, so it was not "
-                                "called again)")
+            # A function that crashed twice would cost a restart on every remaining
+            # check, starving the other functions' checks.
+            raise NotRun(f"{what} was not run: {earlier} (it did so {count} times, so it "
+                         "was not called again)")
         try:
             answer = self.request({"op": "call", "name": name, "args": list(args),
                                    "kwargs": kwargs, "figures": figures},
                                   timeout=timeout, what=what)
-        except (CallTimeout, WorkerCrashed) as exc:
+        except CallTimeout:
+            where = self.current_check or f"an input of size {size}"
+            self.timed_out[name] = (min(size, self.timed_out.get(name, (size, ""))[0]), where)
+            raise
+        except WorkerCrashed as exc:
             self.strikes[name] = (count + 1, exc)
             raise
         if not answer.get("ok"):

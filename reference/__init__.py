@@ -1,44 +1,97 @@
 """Model solutions for the geometry-and-interpolation course (numpy/scipy only).
 
-The public functions of the submodules are re-exported here:
+Everything public is importable from the package itself, which is the one
+spelling to use (``from reference import convex_hull, bezier, delaunay``); the
+implementation lives in private modules (``reference._geometry`` and so on)
+whose layout may change.
 
-- :mod:`reference.geometry`: :func:`orient2d`, :func:`convex_hull`
-- :mod:`reference.interpolation`: :func:`equispaced_nodes`, :func:`chebyshev_nodes`,
-  :func:`equispaced_weights`, :func:`chebyshev_weights`, :func:`barycentric_weights`,
-  :func:`barycentric_interpolate`, :func:`lebesgue_constant`
-- :mod:`reference.bezier`: :func:`bernstein`, :func:`bezier`, :func:`de_casteljau`,
-  :func:`split`
-- :mod:`reference.splines`: :class:`CubicSpline`, :class:`ParametricSpline`,
-  :func:`parametric_spline`
-- :mod:`reference.delaunay`: :func:`incircle`, :func:`delaunay`, :func:`is_delaunay`
-- :mod:`reference.plotting`: :func:`plot_points_and_hull`, :func:`plot_de_casteljau`,
-  :func:`plot_interpolant`, :func:`plot_spline`, :func:`plot_car`, :func:`tplot`
-- :mod:`reference.data`: :func:`car`, :data:`CAR_STROKE_NAMES`, :func:`save_car`,
-  :func:`load_strokes`
+Geometry (exact predicates)
+    :func:`orient2d`, :func:`orient2d_many`, :func:`convex_hull`,
+    :func:`incircle`, :func:`incircle_many`, :func:`delaunay`,
+    :func:`is_delaunay`
+Polynomial interpolation
+    :func:`equispaced_nodes`, :func:`chebyshev_nodes`,
+    :func:`equispaced_weights`, :func:`chebyshev_weights`,
+    :func:`barycentric_weights`, :func:`barycentric_interpolate`,
+    :func:`lebesgue_constant`
+Bezier curves
+    :func:`bernstein`, :func:`bezier`, :func:`de_casteljau`, :func:`split`
+Cubic splines
+    :class:`CubicSpline`, :class:`ParametricSpline`, :func:`parametric_spline`
+The lecture's figures
+    :func:`plot_points_and_hull`, :func:`plot_de_casteljau`,
+    :func:`plot_interpolant`, :func:`plot_spline`, :func:`plot_car`,
+    :func:`tplot`
+Data
+    :func:`car`, :data:`CAR_STROKE_NAMES`, :func:`save_car`,
+    :func:`load_strokes`
 
-Two functions share the name of their module: after ``import reference``,
-``reference.bezier`` and ``reference.delaunay`` are the *functions*.  Reach the
-modules with ``from reference.bezier import de_casteljau`` or
-``importlib.import_module("reference.delaunay")``.
+Every function validates its input first: masked and complex arrays are
+refused (``TypeError``), as are NaN, infinity and numbers too large for a
+double (``ValueError``), each with a message naming the argument. Integer
+coordinates of any size a double can hold are used exactly by the geometric
+predicates.
 """
 
-from reference import bezier as _bezier_module
-from reference import data, geometry, interpolation, plotting, splines
-from reference import delaunay as _delaunay_module
-from reference.bezier import *  # noqa: F403
-from reference.data import *  # noqa: F403
-from reference.delaunay import *  # noqa: F403
-from reference.geometry import *  # noqa: F403
-from reference.interpolation import *  # noqa: F403
-from reference.plotting import *  # noqa: F403
-from reference.splines import *  # noqa: F403
+from reference._bezier import bernstein, bezier, de_casteljau, split
+from reference._data import CAR_STROKE_NAMES, car, load_strokes, save_car
+from reference._delaunay import delaunay, incircle, incircle_many, is_delaunay
+from reference._geometry import convex_hull, orient2d, orient2d_many
+from reference._interpolation import (
+    barycentric_interpolate,
+    barycentric_weights,
+    chebyshev_nodes,
+    chebyshev_weights,
+    equispaced_nodes,
+    equispaced_weights,
+    lebesgue_constant,
+)
+from reference._plotting import (
+    plot_car,
+    plot_de_casteljau,
+    plot_interpolant,
+    plot_points_and_hull,
+    plot_spline,
+    tplot,
+)
+from reference._splines import CubicSpline, ParametricSpline, parametric_spline
 
 __all__ = [
-    *geometry.__all__,
-    *interpolation.__all__,
-    *_bezier_module.__all__,
-    *splines.__all__,
-    *_delaunay_module.__all__,
-    *plotting.__all__,
-    *data.__all__,
+    # geometry
+    "orient2d",
+    "orient2d_many",
+    "convex_hull",
+    "incircle",
+    "incircle_many",
+    "delaunay",
+    "is_delaunay",
+    # interpolation
+    "equispaced_nodes",
+    "chebyshev_nodes",
+    "equispaced_weights",
+    "chebyshev_weights",
+    "barycentric_weights",
+    "barycentric_interpolate",
+    "lebesgue_constant",
+    # Bezier curves
+    "bernstein",
+    "bezier",
+    "de_casteljau",
+    "split",
+    # splines
+    "CubicSpline",
+    "ParametricSpline",
+    "parametric_spline",
+    # figures
+    "plot_points_and_hull",
+    "plot_de_casteljau",
+    "plot_interpolant",
+    "plot_spline",
+    "plot_car",
+    "tplot",
+    # data
+    "CAR_STROKE_NAMES",
+    "car",
+    "save_car",
+    "load_strokes",
 ]

@@ -3,11 +3,28 @@
 Every public routine calls one of these helpers first and then works on clean
 arrays (the pattern of SciPy's ``prepare_input`` in ``interpolate/_cubic.py``).
 Messages name the argument, state the rule and show what was received.
+
+What is refused everywhere, rather than silently changed:
+
+* masked arrays (the mask would be ignored): ``TypeError``;
+* complex numbers, even with a zero imaginary part (the maths is real):
+  ``TypeError``;
+* anything that is not a real number (strings, ``None``, objects):
+  ``ValueError``;
+* NaN, infinity, and numbers too large for a double (``10**400``):
+  ``ValueError``.
+
+Integers are accepted at any size that a double can hold. The geometric
+predicates keep them exact (:func:`as_exact_array`); the numerical routines
+work in double precision (:func:`as_finite_array`).
 """
 
 from __future__ import annotations
 
+import math
 import numbers
+import sys
+from fractions import Fraction
 from typing import Any
 
 import numpy as np
@@ -15,42 +32,193 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "as_finite_array",
+    "as_exact_array",
     "as_point",
     "as_points",
+    "as_exact_point",
+    "as_exact_points",
     "as_nonnegative_int",
     "as_parameter",
     "check_choice",
 ]
 
+#: Integers of at most this magnitude are exactly representable as doubles.
+_EXACT_INT = 2**53
+#: Largest finite double.
+_MAX = sys.float_info.max
 
-def as_finite_array(
-    value: ArrayLike, name: str, *, ndim: int | None = None, dtype: Any = np.float64
-) -> NDArray[np.float64]:
-    """Return ``value`` as a float array, checking that it is finite.
 
-    Raises ``ValueError`` naming ``name`` when the value cannot be converted,
-    has the wrong number of dimensions, or holds NaN or infinity.
+def _parse(value: Any, name: str) -> NDArray[Any]:
+    """``value`` as an ndarray of a real numeric dtype, or of ``object`` numbers.
+
+    Refuses masked arrays, complex values and non-numbers; does not yet check
+    finiteness.
     """
+    if isinstance(value, np.ma.MaskedArray):
+        raise TypeError(
+            f"`{name}` must be a plain array, not a masked array (its mask would be "
+            "ignored); pass `value.filled(...)` or `value.compressed()`."
+        )
     try:
-        arr = np.asarray(value, dtype=dtype)
-    except (TypeError, ValueError) as exc:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, OverflowError) as exc:
         raise ValueError(
             f"`{name}` must be an array of real numbers; got {type(value).__name__}."
         ) from exc
+    kind = arr.dtype.kind
+    if kind == "c":
+        raise TypeError(
+            f"`{name}` must hold real numbers; got complex values (dtype {arr.dtype}). "
+            "Pass the real part explicitly if that is what you mean."
+        )
+    if kind in "biuf":
+        return arr
+    if kind == "O":
+        for v in arr.reshape(-1):
+            if isinstance(v, (complex, np.complexfloating)):
+                raise TypeError(
+                    f"`{name}` must hold real numbers; got the complex value {v!r}."
+                )
+            if not isinstance(v, numbers.Real):
+                raise ValueError(
+                    f"`{name}` must be an array of real numbers; got an element of "
+                    f"type {type(v).__name__}."
+                )
+        return arr
+    raise ValueError(
+        f"`{name}` must be an array of real numbers; got {type(value).__name__} "
+        f"of dtype {arr.dtype}."
+    )
+
+
+def _too_large(name: str, v: Any) -> ValueError:
+    try:
+        size = f"about 1e{int(math.log10(abs(v)))}"
+    except (TypeError, ValueError, OverflowError):  # pragma: no cover - defensive
+        size = repr(v)
+    return ValueError(
+        f"`{name}` must hold values that fit in a double (magnitude at most "
+        f"{_MAX:.4g}); got {size}."
+    )
+
+
+def _not_finite(name: str) -> ValueError:
+    return ValueError(f"`{name}` must contain only finite values (no NaN or inf).")
+
+
+def _float_exact(v: Any) -> bool:
+    """True when the real number ``v`` equals a double exactly."""
+    if isinstance(v, (float, np.floating)):
+        return bool(np.isfinite(v)) and (
+            not isinstance(v, np.longdouble) or float(v) == v
+        )
+    if isinstance(v, numbers.Integral):
+        return abs(int(v)) <= _EXACT_INT
+    try:
+        return Fraction(float(v)) == v
+    except (OverflowError, ValueError):
+        return False
+
+
+def _exact_number(v: Any, name: str) -> int | Fraction:
+    """``v`` as an exact Python ``int`` or ``Fraction``, checked to fit in a double."""
+    if isinstance(v, numbers.Integral):
+        out: int | Fraction = int(v)
+    elif isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            raise _not_finite(name)
+        x = Fraction(v) if not isinstance(v, np.longdouble) else Fraction(*v.as_integer_ratio())
+        out = x.numerator if x.denominator == 1 else x
+    else:
+        out = Fraction(v)
+    if abs(out) > _MAX:
+        raise _too_large(name, out)
+    return out
+
+
+def _from_objects(arr: NDArray[Any], name: str) -> NDArray[Any]:
+    """Object array of real numbers -> float64 when every value is a double, else
+    an exact object array of ``int``/``Fraction``."""
+    flat = arr.reshape(-1)
+    if all(_float_exact(v) for v in flat):
+        return arr.astype(np.float64)
+    out = np.empty(arr.shape, dtype=object)
+    out_flat = out.reshape(-1)
+    for i, v in enumerate(flat):
+        out_flat[i] = _exact_number(v, name)
+    return out
+
+
+def _check_ndim(arr: NDArray[Any], name: str, ndim: int | None) -> None:
     if ndim is not None and arr.ndim != ndim:
         raise ValueError(
             f"`{name}` must be {ndim}-dimensional; got an array of shape {arr.shape}."
         )
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"`{name}` must contain only finite values (no NaN or inf).")
-    return arr
 
 
-def as_points(
-    value: ArrayLike, name: str = "points", *, dim: int | None = 2, min_points: int = 1
-) -> NDArray[np.float64]:
-    """Return ``value`` as a finite ``(n, dim)`` float array with ``n >= min_points``."""
-    arr = as_finite_array(value, name)
+def as_exact_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> NDArray[Any]:
+    """Return ``value`` exactly: a float64 array, or an object array of ints/Fractions.
+
+    Float64 is returned whenever it represents every value exactly (all
+    doubles, integers up to ``2**53``); otherwise (larger integers, e.g. int64
+    near ``2**62``, Python ints, or such integers mixed with floats) the
+    values are kept as Python ``int`` and :class:`fractions.Fraction`. Every
+    value must fit in a double; NaN and infinity are refused.
+    """
+    arr = _parse(value, name)
+    _check_ndim(arr, name, ndim)
+    kind = arr.dtype.kind
+    if kind == "O":
+        return _from_objects(arr, name)
+    if kind in "iu":
+        if arr.size == 0 or (int(arr.max()) <= _EXACT_INT and int(arr.min()) >= -_EXACT_INT):
+            return arr.astype(np.float64)
+        return _from_objects(arr.astype(object), name)
+    if kind == "f" and arr.size and not isinstance(value, np.ndarray):
+        # A list such as [2**53 + 1, 0.5] becomes float64 with the integer
+        # rounded; read it again element by element.
+        with np.errstate(invalid="ignore"):
+            big = np.nanmax(np.abs(arr.astype(np.float64))) >= _EXACT_INT
+        if big:
+            obj = np.asarray(value, dtype=object)
+            if obj.shape == arr.shape:
+                return _from_objects(obj, name)
+    if arr.dtype == np.longdouble and arr.dtype != np.float64:
+        return _from_objects(arr.astype(object), name)
+    out = arr.astype(np.float64)
+    if not np.all(np.isfinite(out)):
+        raise _not_finite(name)
+    return out
+
+
+def as_finite_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> NDArray[np.float64]:
+    """Return ``value`` as a finite float64 array (integers correctly rounded).
+
+    Raises ``TypeError`` for masked or complex input and ``ValueError`` naming
+    ``name`` when the value is not an array of real numbers, has the wrong
+    number of dimensions, holds NaN or infinity, or a number too large for a
+    double.
+    """
+    arr = _parse(value, name)
+    _check_ndim(arr, name, ndim)
+    if arr.dtype.kind == "O":
+        arr = _from_objects(arr, name)
+    with np.errstate(over="ignore"):
+        try:
+            out = arr.astype(np.float64)
+        except OverflowError:  # pragma: no cover - caught by _from_objects
+            raise _too_large(name, max(abs(v) for v in arr.reshape(-1))) from None
+    if not np.all(np.isfinite(out)):
+        if arr.dtype.kind == "O" or (arr.dtype.kind == "f" and np.all(np.isfinite(arr))):
+            big = max(abs(v) for v in arr.reshape(-1).tolist())
+            raise _too_large(name, big)
+        raise _not_finite(name)
+    return out
+
+
+def _check_points_shape(
+    arr: NDArray[Any], name: str, dim: int | None, min_points: int
+) -> None:
     if arr.ndim != 2 or (dim is not None and arr.shape[1] != dim):
         want = f"(n, {dim})" if dim is not None else "(n, d)"
         raise ValueError(f"`{name}` must have shape {want}; got {arr.shape}.")
@@ -58,12 +226,42 @@ def as_points(
         raise ValueError(
             f"`{name}` must hold at least {min_points} point(s); got {arr.shape[0]}."
         )
+
+
+def as_points(
+    value: ArrayLike, name: str = "points", *, dim: int | None = 2, min_points: int = 1
+) -> NDArray[np.float64]:
+    """Return ``value`` as a finite ``(n, dim)`` float array with ``n >= min_points``."""
+    arr = as_finite_array(value, name)
+    _check_points_shape(arr, name, dim, min_points)
     return arr
+
+
+def as_exact_points(
+    value: ArrayLike, name: str = "points", *, dim: int | None = 2, min_points: int = 1
+) -> tuple[NDArray[Any], NDArray[np.float64]]:
+    """Return ``(exact, approx)`` for an ``(n, dim)`` point set.
+
+    ``exact`` is :func:`as_exact_array` of ``value`` and ``approx`` its
+    correctly rounded float64 copy (the same array when ``exact`` is float64).
+    """
+    exact = as_exact_array(value, name)
+    _check_points_shape(exact, name, dim, min_points)
+    approx = exact if exact.dtype != object else exact.astype(np.float64)
+    return exact, approx
 
 
 def as_point(value: ArrayLike, name: str, *, dim: int = 2) -> NDArray[np.float64]:
     """Return ``value`` as a finite point of shape ``(dim,)``."""
     arr = as_finite_array(value, name)
+    if arr.shape != (dim,):
+        raise ValueError(f"`{name}` must be a point of shape ({dim},); got {arr.shape}.")
+    return arr
+
+
+def as_exact_point(value: ArrayLike, name: str, *, dim: int = 2) -> NDArray[Any]:
+    """Return ``value`` as a point of shape ``(dim,)``, exactly (see :func:`as_exact_array`)."""
+    arr = as_exact_array(value, name)
     if arr.shape != (dim,):
         raise ValueError(f"`{name}` must be a point of shape ({dim},); got {arr.shape}.")
     return arr

@@ -21,6 +21,7 @@ import os
 import signal
 import socket
 import sys
+import sysconfig
 import time
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,7 @@ from autograder import protocol, sandbox  # noqa: E402
 from autograder.worker import execute, figures, serve  # noqa: E402
 
 _PR_SET_PDEATHSIG = 1
+_PR_SET_CHILD_SUBREAPER = 36
 
 
 def _die_with_parent() -> None:
@@ -50,6 +52,20 @@ def _die_with_parent() -> None:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
     except (OSError, AttributeError):  # not Linux: the socket EOF still ends us
+        pass
+
+
+def _adopt_orphans() -> None:
+    """Become the child subreaper: whatever a submission leaves behind stays below us.
+
+    A grader that is not root has neither a user nor a cgroup per slot; it finds a
+    submission's processes as the descendants of this process
+    (:func:`autograder.session.kill_descendants`), even those whose parent died.
+    """
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux
         pass
 
 
@@ -81,6 +97,10 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         notes = sandbox.enter_sandbox(policy, workdir, slot=int(request["slot"]),
                                       exclude=[Path(p) for p in request.get("exclude", [])])
         _die_with_parent()
+        gap = _unreadable_path()
+        if gap is not None:
+            protocol.send_message(sock, {"op": "sandbox-broken", "path": gap[0], "error": gap[1]})
+            return
         output = execute.capture_output(policy.limits.output_bytes)
         protocol.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
@@ -97,6 +117,37 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         code = 70
     finally:
         os._exit(code)
+
+
+def _unreadable_path() -> tuple[str, str] | None:
+    """The first file student code needs that the sandbox does not let it read, if any.
+
+    The standard library, numpy, scipy, matplotlib and IPython must be readable
+    wherever they are installed (a venv inside the repository, ``/autograder``,
+    beside a release folder); otherwise the grader reports an engine error
+    instead of letting every import in the notebook fail.
+    """
+    stdlib = sysconfig.get_paths()["stdlib"]
+    # Files only, for the standard library: its folder may be split into one rule per
+    # entry (site-packages inside it holds the grader's own packages), and imports
+    # use the folder listing the warm parent already cached.
+    probes = [os.path.join(stdlib, "os.py"), os.path.join(stdlib, "json", "__init__.py"),
+              os.path.join(stdlib, "fractions.py"), os.path.join(stdlib, "encodings")]
+    for name in ("numpy", "scipy", "matplotlib", "IPython"):
+        module = sys.modules.get(name)
+        origin = getattr(module, "__file__", None)
+        if origin:
+            probes += [os.path.dirname(origin), origin]
+    for path in probes:
+        try:
+            if os.path.isdir(path):
+                os.listdir(path)
+            elif os.path.exists(path) or not path.endswith(".py"):
+                with open(path, "rb") as handle:
+                    handle.read(1)
+        except OSError as exc:
+            return path, exc.strerror or str(exc)
+    return None
 
 
 def _announce(sock: socket.socket, index: int) -> None:
@@ -138,6 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--control-fd", type=int, required=True)
     args = parser.parse_args(argv)
     _die_with_parent()
+    _adopt_orphans()
     control = socket.socket(fileno=args.control_fd)
     shell = execute.make_shell()
     execute.warm_up(shell)

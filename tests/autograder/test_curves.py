@@ -15,8 +15,8 @@ from autograder.curves import (
     curve_points,
     hausdorff,
     relative_curve_distance,
+    decode_png,
     render_side_by_side,
-    strokes_points,
 )
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -169,19 +169,29 @@ def test_relative_distance_needs_a_reference():
         relative_curve_distance(circle(10), np.ones((3, 2)))
 
 
-def test_strokes_points_follow_the_reference_splines():
-    from reference.splines import parametric_spline
+def test_engine_holds_no_course_content():
+    """The engine never imports the model solutions: the car belongs to its assignment."""
+    import ast
+    from pathlib import Path
 
-    strokes = [circle(13), np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])]
-    pts = strokes_points(strokes, num=50)
-    assert pts.shape == (100, 2)
-    np.testing.assert_allclose(pts[50:], parametric_spline(strokes[1]).sample(50))
-    np.testing.assert_allclose(pts[0], strokes[0][0], atol=1e-12)
+    package = Path(__file__).resolve().parents[2] / "autograder"
+    for path in package.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            assert not any(n == "reference" or n.startswith("reference.") for n in names), (
+                f"{path.relative_to(package.parent)} imports {names}")
 
 
 # ---------------------------------------------------------------------------
 # pictures
 # ---------------------------------------------------------------------------
+
+def draw_circle(ax):
+    ring = circle(13)
+    ax.plot(ring[:, 0], ring[:, 1])
+
 
 def _student_png():
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -201,7 +211,7 @@ def _student_png():
 def test_side_by_side_is_a_png(student_png):
     import matplotlib.image as mpimg
 
-    png = render_side_by_side(student_png, [circle(13)], title="test")
+    png = render_side_by_side(student_png, draw_circle, title="test")
     assert png.startswith(PNG_SIGNATURE)
     height, width = mpimg.imread(io.BytesIO(png), format="png").shape[:2]
     assert (width, height) == (800, 320)
@@ -209,4 +219,31 @@ def test_side_by_side_is_a_png(student_png):
 
 def test_side_by_side_accepts_png_as_uint8_array():
     png = np.frombuffer(_student_png(), dtype=np.uint8)
-    assert render_side_by_side(png, [circle(13)]).startswith(PNG_SIGNATURE)
+    assert render_side_by_side(png, draw_circle).startswith(PNG_SIGNATURE)
+
+
+def test_side_by_side_draws_the_reference_with_the_given_function():
+    drawn = []
+
+    def draw(ax):
+        drawn.append(ax)
+        ax.plot([0, 1], [0, 1])
+
+    render_side_by_side(None, draw, right_title="the car")
+    assert len(drawn) == 1 and drawn[0].get_title() == "the car"
+
+
+def test_png_bombs_are_not_decoded():
+    """A small file may claim a huge picture: the header is read, the pixels never."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(
+            ">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", 13_000, 13_000, 8, 2, 0, 0, 0)
+    bomb = PNG_SIGNATURE + chunk(b"IHDR", header) + chunk(b"IEND", b"")
+    assert decode_png(bomb) is None
+    assert decode_png(_student_png()) is not None
+    assert decode_png(_student_png(), max_pixels=10) is None

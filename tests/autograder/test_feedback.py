@@ -66,12 +66,20 @@ def test_untrusted_text_is_escaped(folder: Path) -> None:
     assert "Cell 1" in html  # cells are numbered from 1, as the grader's summary does
 
 
-def test_hidden_checks_show_name_and_message_only(folder: Path) -> None:
-    html = render_feedback(folder, make_result())
+def test_hidden_checks_show_status_points_and_message_never_pictures(folder: Path) -> None:
+    passed = CheckResult("convex_hull[unseen-tiny]", 1, 1, "", hidden=True,
+                         dataset="unseen-tiny")
+    result = make_result(tests=make_result().tests + (passed,))
+    html = render_feedback(folder, result)
     assert "convex_hull[unseen-circle]" in html and "Expected 12 vertices, got 11." in html
     assert base64.b64encode(PNG + b"unseen").decode() not in html, "no picture of unseen data"
     hidden = html[html.index("Hidden checks"):]
-    assert "0 / 2 points" not in hidden and "0 of 2 points together" in hidden
+    assert "1 of 3 points together" in hidden
+    failed = hidden[hidden.index("convex_hull[unseen-circle]"):hidden.index("unseen-tiny")]
+    assert "0 / 2 points" in failed and "wrong answer" in failed and "badge failed" in failed
+    assert "it is not shown here" in failed, "a picture the page does not show is named as such"
+    ok = hidden[hidden.index("convex_hull[unseen-tiny]"):]
+    assert "1 / 1 points" in ok and "passed" in ok and "not shown here" not in ok
 
 
 def test_long_output_is_cut_and_says_so() -> None:

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import doctest
 import re
 
 import numpy as np
 import pytest
 
-import reference.data as data
-from reference.data import CAR_STROKE_NAMES, car, load_strokes, save_car
-from reference.splines import parametric_spline
+import reference._data as data
+from reference import CAR_STROKE_NAMES, car, load_strokes, save_car
+from reference import parametric_spline
 
 CLOSED = {"rear_window", "front_window", "rear_wheel", "front_wheel", "rear_hubcap", "front_hubcap"}
 # How far the drawn spline may leave the bounding box of its points, as a
@@ -176,9 +175,3 @@ def test_load_and_save_reject_bad_paths(tmp_path):
         load_strokes(single)
     with pytest.raises(FileNotFoundError):
         load_strokes(tmp_path / "missing.npz")
-
-
-def test_doctests():
-    result = doctest.testmod(data, optionflags=doctest.NORMALIZE_WHITESPACE)
-    assert result.attempted > 0
-    assert result.failed == 0

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import doctest
 import re
 
 import numpy as np
@@ -11,8 +10,8 @@ import scipy.interpolate as si
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference.splines as splines
-from reference.splines import CubicSpline, ParametricSpline, parametric_spline
+import reference._splines as splines
+from reference import CubicSpline, ParametricSpline, parametric_spline
 
 # Coefficients agree with SciPy's to rounding: both solve the same slope system
 # with a banded LU; differences come from row scaling and the order of operations.
@@ -417,9 +416,3 @@ def test_parametric_bad_input(points, kwargs, message):
 def test_sample_rejects_bad_num():
     with pytest.raises(ValueError, match=re.escape("`num` must be >= 2; got 1.")):
         parametric_spline(STROKE).sample(num=1)
-
-
-def test_doctests():
-    result = doctest.testmod(splines, optionflags=doctest.NORMALIZE_WHITESPACE)
-    assert result.attempted > 0
-    assert result.failed == 0

@@ -26,11 +26,11 @@ from reference._validation import (
     as_nonnegative_int,
     as_points,
 )
-from reference.bezier import bezier, de_casteljau
-from reference.data import car
-from reference.geometry import convex_hull
-from reference.interpolation import barycentric_interpolate
-from reference.splines import parametric_spline
+from reference._bezier import bezier, de_casteljau
+from reference._data import car
+from reference._geometry import convex_hull
+from reference._interpolation import barycentric_interpolate
+from reference._splines import parametric_spline
 
 __all__ = [
     "plot_points_and_hull",
@@ -103,7 +103,7 @@ def plot_points_and_hull(
     --------
     >>> import matplotlib
     >>> from matplotlib.figure import Figure
-    >>> from reference.plotting import plot_points_and_hull
+    >>> from reference import plot_points_and_hull
     >>> ax = Figure().add_subplot()
     >>> dots, polygon = plot_points_and_hull(ax, [[0, 0], [1, 0], [0, 1], [0.2, 0.2]])
     >>> polygon.get_xydata().tolist()
@@ -164,7 +164,7 @@ def plot_de_casteljau(ax: Axes, ctrl: ArrayLike, t: float, num: int = 200) -> li
     Examples
     --------
     >>> from matplotlib.figure import Figure
-    >>> from reference.plotting import plot_de_casteljau
+    >>> from reference import plot_de_casteljau
     >>> ax = Figure().add_subplot()
     >>> artists = plot_de_casteljau(ax, [[0, 0], [1, 1], [1.2, 0.4]], 0.4)
     >>> len(artists)  # curve, polygon, level 1 (segment + points), level 2 (point)
@@ -227,7 +227,7 @@ def plot_interpolant(
     ValueError
         If ``ax`` is not an ``Axes``, ``f`` is not callable or does not return
         finite values of the right shape, ``nodes``/``weights`` are invalid
-        (see :func:`reference.interpolation.barycentric_interpolate`), ``num``
+        (see :func:`reference.barycentric_interpolate`), ``num``
         is not an integer ``>= 2`` or ``label`` is not a string.
 
     Notes
@@ -240,8 +240,8 @@ def plot_interpolant(
     Examples
     --------
     >>> from matplotlib.figure import Figure
-    >>> from reference.interpolation import equispaced_nodes, equispaced_weights
-    >>> from reference.plotting import plot_interpolant
+    >>> from reference import equispaced_nodes, equispaced_weights
+    >>> from reference import plot_interpolant
     >>> ax = Figure().add_subplot()
     >>> runge = lambda x: 1 / (1 + 16 * x**2)
     >>> artists = plot_interpolant(ax, runge, equispaced_nodes(15), equispaced_weights(15))
@@ -295,9 +295,9 @@ def plot_spline(
     ax : matplotlib.axes.Axes
         Where to draw.
     points : array_like, shape (m, 2)
-        Points to interpolate (see :func:`reference.splines.parametric_spline`).
+        Points to interpolate (see :func:`reference.parametric_spline`).
     bc_type, parametrization
-        As in :func:`reference.splines.parametric_spline`.
+        As in :func:`reference.parametric_spline`.
     num : int, optional
         Number of curve points drawn (at least 2).
 
@@ -310,12 +310,12 @@ def plot_spline(
     ------
     ValueError
         If ``ax`` is not an ``Axes``, ``num`` is not an integer ``>= 2``, or
-        :func:`~reference.splines.parametric_spline` rejects the input.
+        :func:`~reference.parametric_spline` rejects the input.
 
     Examples
     --------
     >>> from matplotlib.figure import Figure
-    >>> from reference.plotting import plot_spline
+    >>> from reference import plot_spline
     >>> ax = Figure().add_subplot()
     >>> curve, marks = plot_spline(ax, [[0, 0], [1, 1], [2, 0], [3, 1]], num=50)
     >>> curve.get_xydata().shape
@@ -341,7 +341,7 @@ def plot_car(ax: Axes, strokes: Sequence[ArrayLike] | None = None, num: int = 20
         Where to draw.
     strokes : sequence of array_like, optional
         Strokes, each an ``(m, 2)`` array with ``m >= 2``; default
-        :func:`reference.data.car`.
+        :func:`reference.car`.
     num : int, optional
         Number of points drawn per stroke (at least 2).
 
@@ -360,7 +360,7 @@ def plot_car(ax: Axes, strokes: Sequence[ArrayLike] | None = None, num: int = 20
     Examples
     --------
     >>> from matplotlib.figure import Figure
-    >>> from reference.plotting import plot_car
+    >>> from reference import plot_car
     >>> ax = Figure().add_subplot()
     >>> len(plot_car(ax))
     9
@@ -433,7 +433,7 @@ def tplot(
     Examples
     --------
     >>> from matplotlib.figure import Figure
-    >>> from reference.plotting import tplot
+    >>> from reference import tplot
     >>> ax = Figure().add_subplot()
     >>> square = [[0, 0], [1, 0], [1, 1], [0, 1]]
     >>> mesh = tplot(ax, square, [[0, 1, 2], [0, 2, 3]])

@@ -185,7 +185,7 @@ def equispaced_nodes(n: int) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> from reference.interpolation import equispaced_nodes
+    >>> from reference import equispaced_nodes
     >>> equispaced_nodes(4).tolist()
     [-1.0, -0.5, 0.0, 0.5, 1.0]
     """
@@ -239,7 +239,7 @@ def chebyshev_nodes(n: int, kind: int = 2) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> from reference.interpolation import chebyshev_nodes
+    >>> from reference import chebyshev_nodes
     >>> chebyshev_nodes(4).round(6).tolist()
     [-1.0, -0.707107, 0.0, 0.707107, 1.0]
     >>> chebyshev_nodes(1, kind=1).round(6).tolist()
@@ -316,7 +316,7 @@ def equispaced_weights(n: int) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> from reference.interpolation import equispaced_weights
+    >>> from reference import equispaced_weights
     >>> equispaced_weights(4).tolist()
     [0.16666666666666666, -0.6666666666666666, 1.0, -0.6666666666666666, 0.16666666666666666]
     >>> w = equispaced_weights(3000)
@@ -383,7 +383,7 @@ def chebyshev_weights(n: int, kind: int = 2) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> from reference.interpolation import chebyshev_weights
+    >>> from reference import chebyshev_weights
     >>> chebyshev_weights(4).tolist()
     [0.5, -1.0, 1.0, -1.0, 0.5]
     >>> chebyshev_weights(2, kind=1).round(6).tolist()
@@ -452,7 +452,7 @@ def barycentric_weights(nodes: ArrayLike) -> NDArray[np.float64]:
 
     Examples
     --------
-    >>> from reference.interpolation import barycentric_weights
+    >>> from reference import barycentric_weights
     >>> barycentric_weights([-1.0, 0.0, 1.0]).tolist()
     [0.5, -1.0, 0.5]
     >>> barycentric_weights([0.0, 2.0, 1.0]).tolist()
@@ -625,7 +625,7 @@ def barycentric_interpolate(
     points:
 
     >>> import numpy as np
-    >>> from reference.interpolation import (barycentric_interpolate,
+    >>> from reference import (barycentric_interpolate,
     ...     chebyshev_nodes, chebyshev_weights)
     >>> print(barycentric_interpolate([-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], 0.5))
     0.25
@@ -771,7 +771,7 @@ def lebesgue_constant(nodes: ArrayLike, weights: ArrayLike | None = None) -> flo
 
     Examples
     --------
-    >>> from reference.interpolation import (lebesgue_constant,
+    >>> from reference import (lebesgue_constant,
     ...     chebyshev_nodes, equispaced_nodes)
     >>> round(lebesgue_constant(equispaced_nodes(2)), 6)  # exactly 5/4
     1.25

@@ -128,7 +128,7 @@ def bernstein(n: int, i: int, t: ArrayLike) -> NDArray[np.float64] | np.float64:
     Examples
     --------
     >>> import numpy as np
-    >>> from reference.bezier import bernstein
+    >>> from reference import bernstein
     >>> bernstein(3, 1, [0.0, 0.5, 1.0]).tolist()
     [0.0, 0.375, 0.0]
     >>> t = np.linspace(0, 1, 5)
@@ -229,7 +229,7 @@ def bezier(ctrl: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
     --------
     The lecture's quadratic at ``t = 0.4``:
 
-    >>> from reference.bezier import bezier
+    >>> from reference import bezier
     >>> ctrl = [[0.0, 0.0], [1.0, 1.0], [1.2, 0.4]]
     >>> bezier(ctrl, 0.4).round(6).tolist()
     [0.672, 0.544]
@@ -288,7 +288,7 @@ def de_casteljau(ctrl: ArrayLike, t: float) -> list[NDArray[np.float64]]:
 
     Examples
     --------
-    >>> from reference.bezier import de_casteljau
+    >>> from reference import de_casteljau
     >>> levels = de_casteljau([[0.0, 0.0], [1.0, 1.0], [1.2, 0.4]], 0.5)
     >>> [level.tolist() for level in levels]
     [[[0.0, 0.0], [1.0, 1.0], [1.2, 0.4]], [[0.5, 0.5], [1.1, 0.7]], [[0.8, 0.6]]]
@@ -347,7 +347,7 @@ def split(ctrl: ArrayLike, t: float) -> tuple[NDArray[np.float64], NDArray[np.fl
 
     Examples
     --------
-    >>> from reference.bezier import split
+    >>> from reference import split
     >>> left, right = split([[0.0, 0.0], [1.0, 1.0], [1.2, 0.4]], 0.5)
     >>> left.tolist()
     [[0.0, 0.0], [0.5, 0.5], [0.8, 0.6]]

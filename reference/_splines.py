@@ -4,7 +4,7 @@
 (the same ``bc_type`` vocabulary and the same piecewise-polynomial coefficient
 array ``c``) so that a student's spline can be compared with either.
 :func:`parametric_spline` draws a smooth curve through a sequence of points, the
-tool used to draw the car of :func:`reference.data.car`.
+tool used to draw the car of :func:`reference.car`.
 """
 
 from __future__ import annotations
@@ -398,7 +398,7 @@ class CubicSpline:
     Examples
     --------
     >>> import numpy as np
-    >>> from reference.splines import CubicSpline
+    >>> from reference import CubicSpline
     >>> x = np.array([0.0, 1.0, 2.0, 3.0])
     >>> s = CubicSpline(x, x**3, bc_type="not-a-knot")  # reproduces cubics
     >>> print(f"{s(1.5):.4f} {s(1.5, nu=1):.4f} {s(1.5, nu=2):.4f}")
@@ -458,7 +458,7 @@ class CubicSpline:
 
         Examples
         --------
-        >>> from reference.splines import CubicSpline
+        >>> from reference import CubicSpline
         >>> s = CubicSpline([0.0, 1.0, 2.0], [[0.0, 1.0], [1.0, 0.0], [0.0, 1.0]])
         >>> s(0.5).shape, s([0.5, 1.5]).shape
         ((2,), (2, 2))
@@ -543,7 +543,7 @@ class ParametricSpline:
 
         Examples
         --------
-        >>> from reference.splines import parametric_spline
+        >>> from reference import parametric_spline
         >>> curve = parametric_spline([[0, 0], [1, 1], [2, 0]])
         >>> curve.sample(num=5).shape
         (5, 2)
@@ -612,7 +612,7 @@ def parametric_spline(
     Examples
     --------
     >>> import numpy as np
-    >>> from reference.splines import parametric_spline
+    >>> from reference import parametric_spline
     >>> square = [[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]
     >>> curve = parametric_spline(square, bc_type="periodic")
     >>> curve.knots

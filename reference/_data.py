@@ -2,8 +2,8 @@
 
 :func:`car` returns the strokes of a car in side view.  Each stroke is a short
 sequence of points; drawing every stroke as a parametric natural cubic spline
-with chord-length parameter (:func:`reference.splines.parametric_spline`, the
-defaults) gives the picture of :func:`reference.plotting.plot_car`.
+with chord-length parameter (:func:`reference.parametric_spline`, the
+defaults) gives the picture of :func:`reference.plot_car`.
 :func:`save_car` writes the strokes to the ``.npz`` file that assignments ship,
 and :func:`load_strokes` reads such a file back.
 """
@@ -120,7 +120,7 @@ def car() -> list[NDArray[np.float64]]:
 
     Examples
     --------
-    >>> from reference.data import car, CAR_STROKE_NAMES
+    >>> from reference import car, CAR_STROKE_NAMES
     >>> strokes = car()
     >>> len(strokes) == len(CAR_STROKE_NAMES)
     True
@@ -174,7 +174,7 @@ def save_car(path: str | os.PathLike[str]) -> Path:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> from reference.data import save_car, load_strokes, car
+    >>> from reference import save_car, load_strokes, car
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     written = save_car(pathlib.Path(tmp) / "car.npz")
     ...     strokes = load_strokes(written)

@@ -7,161 +7,101 @@ et al. 2008). Here the determinant is evaluated with Shewchuk's floating-point
 filter: when the rounded value is larger than a certified bound on its rounding
 error its sign is the true sign; otherwise the determinant is recomputed
 exactly with :class:`fractions.Fraction` (every finite double is a rational
-number, so the exact sign is always available).
+number, so the exact sign is always available). Integers too large to be
+doubles (beyond ``2**53``) are never rounded: they are computed with exactly.
 
-Public functions: :func:`orient2d`, :func:`convex_hull`.
+Public functions: :func:`orient2d`, :func:`orient2d_many`, :func:`convex_hull`.
 """
 
 from __future__ import annotations
 
-from fractions import Fraction
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from reference._validation import as_point, as_points, check_choice
+from reference import _predicates as P
+from reference._validation import as_exact_array, as_exact_point, as_exact_points, check_choice
 
-__all__ = ["orient2d", "convex_hull"]
-
-# Unit roundoff of IEEE binary64 (Shewchuk's "epsilon").
-_EPS = 2.0**-53
-# Shewchuk (1997), Section 4.2: |det - fl(det)| <= (3 + 16 eps) eps * detsum.
-_CCW_ERRBOUND = (3.0 + 16.0 * _EPS) * _EPS
-# The bound assumes no underflow or overflow. It is used only when every
-# coordinate difference is zero or lies in [_LO, _HI]: then every product is a
-# normal number and so is the bound itself; otherwise the exact path decides.
-_LO = 2.0**-450
-_HI = 2.0**500
+__all__ = ["orient2d", "orient2d_many", "convex_hull"]
 
 _METHODS = ("jarvis", "monotone")
 
 
 # ---------------------------------------------------------------------------
-# Scalar predicate (Python floats)
+# Predicates
 # ---------------------------------------------------------------------------
 
 
-def _sign(value: Fraction | float) -> int:
-    return (value > 0) - (value < 0)
+def orient2d_many(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> NDArray[np.int8]:
+    r"""Exact orientation of many triples of points at once.
 
+    Parameters
+    ----------
+    p, q, r : array_like, shape (..., 2)
+        Points with shapes that broadcast together, e.g. one point ``(2,)``
+        against an array ``(m, 2)``. Same values as :func:`orient2d` accepts.
 
-def _orient_exact(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> int:
-    """Exact sign of the orientation determinant, with rationals."""
-    frx, fry = Fraction(rx), Fraction(ry)
-    det = (Fraction(px) - frx) * (Fraction(qy) - fry) - (Fraction(py) - fry) * (
-        Fraction(qx) - frx
-    )
-    return _sign(det)
+    Returns
+    -------
+    ndarray of int8, shape (m,)
+        ``orient2d(p[i], q[i], r[i])`` for each row ``i`` of the broadcast
+        arrays, flattened to one dimension (``m`` is the product of the
+        broadcast shape without its last axis).
 
+    Raises
+    ------
+    ValueError
+        If an argument holds NaN, infinity, a number too large for a double,
+        or non-numbers, or if the shapes do not broadcast to ``(..., 2)``.
+    TypeError
+        If an argument is complex or a masked array.
 
-def _in_range(d: float) -> bool:
-    return d == 0.0 or _LO <= abs(d) <= _HI
+    Notes
+    -----
+    The floating-point filter of :func:`orient2d` is applied to every row at
+    once; only rows where it cannot decide are recomputed exactly, one by one,
+    with :class:`fractions.Fraction`. Integer input beyond ``2**53`` is
+    evaluated in exact integer arithmetic for every row.
 
+    See Also
+    --------
+    orient2d : the same predicate for one triple.
 
-def _orient_xy(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> int:
-    """Sign of orient2d for Python floats: filter first, exact when unsure."""
-    acx = px - rx
-    bcx = qx - rx
-    acy = py - ry
-    bcy = qy - ry
-    detleft = acx * bcy
-    detright = acy * bcx
-    det = detleft - detright
-    detsum = abs(detleft) + abs(detright)
-    if _in_range(acx) and _in_range(bcx) and _in_range(acy) and _in_range(bcy):
-        if det > _CCW_ERRBOUND * detsum or -det > _CCW_ERRBOUND * detsum:
-            return 1 if det > 0 else -1
-        if detsum == 0.0:
-            # Both products are exact zeros (no underflow in range).
-            return 0
-    return _orient_exact(px, py, qx, qy, rx, ry)
+    References
+    ----------
+    .. [1] J. R. Shewchuk, "Adaptive precision floating-point arithmetic and
+       fast robust geometric predicates", Discrete & Computational Geometry
+       18, 305-363 (1997). :doi:`10.1007/PL00009321`
 
-
-def _orient_xy_tame(px: float, py: float, qx: float, qy: float, rx: float, ry: float) -> int:
-    """:func:`_orient_xy` without the range checks.
-
-    Only for coordinates accepted by :func:`_is_tame`, whose pairwise
-    differences are always zero or inside ``[_LO, _HI]``.
+    Examples
+    --------
+    >>> from reference import orient2d_many
+    >>> orient2d_many([0, 0], [1, 0], [[0, 1], [2, 0], [0, -1]])
+    array([ 1,  0, -1], dtype=int8)
     """
-    acx = px - rx
-    bcx = qx - rx
-    acy = py - ry
-    bcy = qy - ry
-    detleft = acx * bcy
-    detright = acy * bcx
-    det = detleft - detright
-    bound = _CCW_ERRBOUND * (abs(detleft) + abs(detright))
-    if det > bound:
-        return 1
-    if -det > bound:
-        return -1
-    if bound == 0.0:
-        return 0
-    return _orient_exact(px, py, qx, qy, rx, ry)
+    arrays = [as_exact_array(v, name) for v, name in ((p, "p"), (q, "q"), (r, "r"))]
+    for v, name in zip(arrays, "pqr"):
+        if v.ndim == 0 or v.shape[-1] != 2:
+            raise ValueError(
+                f"`{name}` must hold points, an array of shape (..., 2); got {v.shape}."
+            )
+    try:
+        np.broadcast_shapes(*(v.shape for v in arrays))
+    except ValueError:
+        shapes = ", ".join(str(v.shape) for v in arrays)
+        raise ValueError(
+            f"`p`, `q` and `r` must have shapes that broadcast together; got {shapes}."
+        ) from None
+    return P.orient_many(*arrays)
 
 
-def _is_tame(coords: NDArray[np.float64]) -> bool:
-    """True when every nonzero ``|coordinate|`` lies in ``[2**-140, 2**240]``.
-
-    For such data every difference of two coordinates is zero or lies in
-    ``[2**-193, 2**241]``, inside the ranges that the filters of this module
-    and of :mod:`reference.delaunay` need, so the per-call range checks can be
-    skipped.
-    """
-    mag = np.abs(coords)
-    nonzero = mag[mag > 0]
-    if nonzero.size == 0:
-        return True
-    return bool(nonzero.min() >= 2.0**-140 and nonzero.max() <= 2.0**240)
-
-
-# ---------------------------------------------------------------------------
-# Vectorised predicate
-# ---------------------------------------------------------------------------
-
-
-def _orient2d_many(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> NDArray[np.int8]:
-    """Vectorised :func:`orient2d` over broadcastable arrays of points.
-
-    ``p``, ``q`` and ``r`` have shapes broadcastable to ``(m, 2)``; the result
-    has shape ``(m,)`` and dtype int8. The same filter as the scalar predicate
-    is applied to every row at once; rows where it is inconclusive are decided
-    exactly with :class:`fractions.Fraction`.
-    """
-    p, q, r = np.broadcast_arrays(
-        np.asarray(p, dtype=np.float64),
-        np.asarray(q, dtype=np.float64),
-        np.asarray(r, dtype=np.float64),
-    )
-    p = p.reshape(-1, 2)
-    q = q.reshape(-1, 2)
-    r = r.reshape(-1, 2)
-    with np.errstate(over="ignore", invalid="ignore", under="ignore"):
-        acx = p[:, 0] - r[:, 0]
-        bcx = q[:, 0] - r[:, 0]
-        acy = p[:, 1] - r[:, 1]
-        bcy = q[:, 1] - r[:, 1]
-        detleft = acx * bcy
-        detright = acy * bcx
-        det = detleft - detright
-        detsum = np.abs(detleft) + np.abs(detright)
-        ok = np.ones(det.shape, dtype=bool)
-        for d in (acx, bcx, acy, bcy):
-            a = np.abs(d)
-            ok &= (a == 0.0) | ((a >= _LO) & (a <= _HI))
-        sure = ok & ((np.abs(det) > _CCW_ERRBOUND * detsum) | (detsum == 0.0))
-    out = np.sign(np.where(sure, det, 0.0)).astype(np.int8)
-    for i in np.flatnonzero(~sure):
-        out[i] = _orient_exact(
-            float(p[i, 0]), float(p[i, 1]), float(q[i, 0]),
-            float(q[i, 1]), float(r[i, 0]), float(r[i, 1]),
-        )  # fmt: skip
-    return out
-
-
-# ---------------------------------------------------------------------------
-# Public predicate
-# ---------------------------------------------------------------------------
+def _orient_of(a: NDArray[Any], b: NDArray[Any], c: NDArray[Any]) -> int:
+    """orient2d of three validated points (float64 or exact objects)."""
+    if P.is_exact_objects(a, b, c):
+        a, b, c = (P.to_objects(v) for v in (a, b, c))
+        return P.orient_num(a[0], a[1], b[0], b[1], c[0], c[1])
+    return P.orient_xy(float(a[0]), float(a[1]), float(b[0]), float(b[1]), float(c[0]), float(c[1]))
 
 
 def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
@@ -220,7 +160,7 @@ def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
 
     Examples
     --------
-    >>> from reference.geometry import orient2d
+    >>> from reference import orient2d
     >>> orient2d([0, 0], [1, 0], [0, 1])
     1
     >>> orient2d([0, 0], [0, 1], [1, 0])
@@ -237,27 +177,12 @@ def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
     >>> orient2d(p, [12, 12], [24, 24])
     1
     """
-    a = as_point(p, "p")
-    b = as_point(q, "q")
-    c = as_point(r, "r")
-    return _orient_xy(float(a[0]), float(a[1]), float(b[0]), float(b[1]), float(c[0]), float(c[1]))
+    return _orient_of(as_exact_point(p, "p"), as_exact_point(q, "q"), as_exact_point(r, "r"))
 
 
 # ---------------------------------------------------------------------------
 # Convex hull
 # ---------------------------------------------------------------------------
-
-
-def _sorted_unique(points: NDArray[np.float64]) -> NDArray[np.intp]:
-    """Indices of the distinct points in lexicographic order (x, then y).
-
-    Among equal points the smallest index is kept (``np.lexsort`` is stable).
-    """
-    order = np.lexsort((points[:, 1], points[:, 0]))
-    sp = points[order]
-    keep = np.ones(order.size, dtype=bool)
-    keep[1:] = np.any(sp[1:] != sp[:-1], axis=1)
-    return order[keep]
 
 
 def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -> NDArray[np.intp]:
@@ -305,20 +230,25 @@ def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -
     return idx[~inside]
 
 
-def _monotone_chain(points: NDArray[np.float64], order: NDArray[np.intp]) -> list[int]:
-    """Andrew's monotone chain over distinct points sorted lexicographically."""
+def _monotone_chain(points: NDArray[Any], order: NDArray[np.intp]) -> list[int]:
+    """Andrew's monotone chain over distinct points sorted lexicographically.
+
+    ``points`` are float64 (filtered predicate) or exact objects (exact
+    arithmetic throughout).
+    """
     xs = points[order, 0].tolist()
     ys = points[order, 1].tolist()
     ids = order.tolist()
     if len(ids) == 1:
         return ids
+    orient = P.orient_num if points.dtype == object else P.orient_xy
 
     def chain(seq: range) -> list[int]:
         hull: list[int] = []
         for i in seq:
             while len(hull) >= 2:
                 j, k = hull[-2], hull[-1]
-                if _orient_xy(xs[j], ys[j], xs[k], ys[k], xs[i], ys[i]) > 0:
+                if orient(xs[j], ys[j], xs[k], ys[k], xs[i], ys[i]) > 0:
                     break
                 hull.pop()
             hull.append(i)
@@ -329,27 +259,32 @@ def _monotone_chain(points: NDArray[np.float64], order: NDArray[np.intp]) -> lis
     return [ids[i] for i in lower[:-1] + upper[:-1]]
 
 
-def _hull_monotone(points: NDArray[np.float64]) -> list[int]:
+def _hull_monotone(points: NDArray[Any]) -> list[int]:
     idx = np.arange(points.shape[0])
-    if idx.size > 64:
+    # The prefilter's rounding margins hold for doubles; exact integer input
+    # beyond 2**53 goes straight to the exact scan.
+    if idx.size > 64 and points.dtype != object:
         idx = _akl_toussaint(points, idx, 8)
         if idx.size > 2048:
             idx = _akl_toussaint(points, idx, 64)
-    return _monotone_chain(points, idx[_sorted_unique(points[idx])])
+    return _monotone_chain(points, idx[P.sorted_unique(points[idx])])
 
 
-def _jarvis_step(points: NDArray[np.float64], cur: int, direction: NDArray[np.float64]) -> int:
+def _jarvis_step(
+    points: NDArray[Any], approx: NDArray[np.float64], cur: int, direction: NDArray[np.float64]
+) -> int:
     """Next hull vertex after ``cur`` (an index into the distinct ``points``).
 
     ``direction`` is the direction of the previous hull edge. A float guess
-    (smallest counter-clockwise turn from ``direction``) is corrected with the
-    exact predicate until no point lies strictly to the right of the edge;
-    each correction turns the edge clockwise, so this stops. Among points on
-    the final edge's ray the farthest one is taken.
+    (smallest counter-clockwise turn from ``direction``, computed from the
+    rounded coordinates ``approx``) is corrected with the exact predicate
+    until no point lies strictly to the right of the edge; each correction
+    turns the edge clockwise, so this stops. Among points on the final edge's
+    ray the farthest one is taken (exact comparisons of ``points``).
     """
     c = points[cur]
     with np.errstate(over="ignore", invalid="ignore"):  # only a guess: may overflow
-        d = points - c
+        d = approx - approx[cur]
         heading = np.arctan2(direction[1], direction[0])
         turn = np.mod(np.arctan2(d[:, 1], d[:, 0]) - heading, 2 * np.pi)
     turn[np.isnan(turn)] = 0.0
@@ -358,34 +293,34 @@ def _jarvis_step(points: NDArray[np.float64], cur: int, direction: NDArray[np.fl
     others = np.ones(points.shape[0], dtype=bool)
     others[cur] = False
     for _ in range(points.shape[0]):
-        o = _orient2d_many(c, points[cand], points)
+        o = P.orient_many(c, points[cand], points)
         right = np.flatnonzero((o < 0) & others)
         if right.size == 0:
             break
         cand = int(right[np.argmin(turn[right])])
-    # Farthest point on the ray from c through cand (exact float comparisons).
+    # Farthest point on the ray from c through cand (exact comparisons).
     on_ray = (o == 0) & others
     axis = 0 if points[cand, 0] != c[0] else 1
-    sgn = 1.0 if points[cand, axis] > c[axis] else -1.0
+    sgn = 1 if points[cand, axis] > c[axis] else -1
     key = sgn * points[:, axis]
     on_ray &= key > sgn * c[axis]
     ray = np.flatnonzero(on_ray)
     return int(ray[np.argmax(key[ray])])
 
 
-def _hull_jarvis(points: NDArray[np.float64]) -> list[int]:
-    ids = _sorted_unique(points)
-    pts = points[ids]
+def _hull_jarvis(points: NDArray[Any], approx: NDArray[np.float64]) -> list[int]:
+    ids = P.sorted_unique(points)
+    pts, apx = points[ids], approx[ids]
     if ids.size == 1:
         return [int(ids[0])]
     hull = [0]  # the lexicographically smallest point is a hull vertex
     direction = np.array([0.0, -1.0])
     for _ in range(ids.size):
-        nxt = _jarvis_step(pts, hull[-1], direction)
+        nxt = _jarvis_step(pts, apx, hull[-1], direction)
         if nxt == 0:
             return [int(ids[i]) for i in hull]
         with np.errstate(over="ignore"):
-            direction = pts[nxt] - pts[hull[-1]]
+            direction = apx[nxt] - apx[hull[-1]]
         hull.append(nxt)
     raise RuntimeError("Jarvis march did not close the hull within n steps.")  # pragma: no cover
 
@@ -463,7 +398,7 @@ def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]
     Examples
     --------
     >>> import numpy as np
-    >>> from reference.geometry import convex_hull
+    >>> from reference import convex_hull
     >>> square = [[1, 1], [0, 0], [1, 0], [0.5, 0.5], [0, 1], [0.5, 0]]
     >>> convex_hull(square)
     array([1, 2, 0, 4])
@@ -472,10 +407,10 @@ def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]
     >>> convex_hull([[2, 2], [0, 0], [1, 1]])
     array([1, 0])
     """
-    pts = as_points(points, "points")
+    pts, approx = as_exact_points(points, "points")
     check_choice(method, "method", _METHODS)
     if method == "jarvis":
-        hull = _hull_jarvis(pts)
+        hull = _hull_jarvis(pts, approx)
     else:
         hull = _hull_monotone(pts)
     return np.asarray(hull, dtype=np.intp)

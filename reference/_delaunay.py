@@ -1,42 +1,30 @@
 """Exact in-circle predicate and Delaunay triangulations in the plane.
 
-The in-circle test is evaluated like :func:`reference.geometry.orient2d`: a
+The in-circle test is evaluated like :func:`reference.orient2d`: a
 floating-point filter with Shewchuk's certified error bound, and an exact
 recomputation with :class:`fractions.Fraction` when the filter cannot decide.
 :func:`delaunay` is the Bowyer-Watson algorithm with ghost triangles (no
 super-triangle whose vertices could end up inside a circumcircle), and
 :func:`is_delaunay` checks a triangulation with the same exact predicates.
 
-Public functions: :func:`incircle`, :func:`delaunay`, :func:`is_delaunay`.
+Integers too large to be doubles (beyond ``2**53``) are computed with exactly.
+
+Public functions: :func:`incircle`, :func:`incircle_many`, :func:`delaunay`,
+:func:`is_delaunay`.
 """
 
 from __future__ import annotations
 
-from fractions import Fraction
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from reference._validation import as_point, as_points
-from reference.geometry import (
-    _is_tame,
-    _orient2d_many,
-    _orient_xy,
-    _orient_xy_tame,
-    _sign,
-    _sorted_unique,
-)
+from reference import _predicates as P
+from reference._validation import as_exact_array, as_exact_point, as_exact_points
 
-__all__ = ["incircle", "delaunay", "is_delaunay"]
+__all__ = ["incircle", "incircle_many", "delaunay", "is_delaunay"]
 
-_EPS = 2.0**-53
-# Shewchuk (1997), Section 4.3: |det - fl(det)| <= (10 + 96 eps) eps * permanent.
-_ICC_ERRBOUND = (10.0 + 96.0 * _EPS) * _EPS
-# The bound assumes no underflow or overflow; it is used only when every
-# coordinate difference is zero or lies in [_LO, _HI] (then every product,
-# the permanent and the bound are normal numbers).
-_LO = 2.0**-200
-_HI = 2.0**250
 # Seed of the insertion order: the triangulation is a deterministic function
 # of the input.
 _SEED = 20240607
@@ -47,120 +35,84 @@ _SEED = 20240607
 # ---------------------------------------------------------------------------
 
 
-def _incircle_exact(
-    ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float
-) -> int:
-    """Exact sign of the in-circle determinant, with rationals."""
-    fdx, fdy = Fraction(dx), Fraction(dy)
-    adx, ady = Fraction(ax) - fdx, Fraction(ay) - fdy
-    bdx, bdy = Fraction(bx) - fdx, Fraction(by) - fdy
-    cdx, cdy = Fraction(cx) - fdx, Fraction(cy) - fdy
-    det = (
-        (adx * adx + ady * ady) * (bdx * cdy - cdx * bdy)
-        + (bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy)
-        + (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady)
+def _collinear_error(rows: str) -> ValueError:
+    return ValueError(
+        f"`a`, `b` and `c` must not be collinear (they define no circle); got {rows}."
     )
-    return _sign(det)
 
 
-def _incircle_filter(
-    adx: float, ady: float, bdx: float, bdy: float, cdx: float, cdy: float
-) -> tuple[float, float, float]:
-    """Return ``(det, bound, permanent)`` of Shewchuk's in-circle filter."""
-    bdxcdy = bdx * cdy
-    cdxbdy = cdx * bdy
-    cdxady = cdx * ady
-    adxcdy = adx * cdy
-    adxbdy = adx * bdy
-    bdxady = bdx * ady
-    alift = adx * adx + ady * ady
-    blift = bdx * bdx + bdy * bdy
-    clift = cdx * cdx + cdy * cdy
-    det = alift * (bdxcdy - cdxbdy) + blift * (cdxady - adxcdy) + clift * (adxbdy - bdxady)
-    permanent = (
-        (abs(bdxcdy) + abs(cdxbdy)) * alift
-        + (abs(cdxady) + abs(adxcdy)) * blift
-        + (abs(adxbdy) + abs(bdxady)) * clift
-    )
-    return det, _ICC_ERRBOUND * permanent, permanent
+def incircle_many(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> NDArray[np.int8]:
+    r"""Exact in-circle test for many quadruples of points at once.
 
+    Parameters
+    ----------
+    a, b, c : array_like, shape (..., 2)
+        Corners of the circles, in either orientation, never collinear.
+    d : array_like, shape (..., 2)
+        Query points. The four shapes must broadcast together.
 
-def _in_range(d: float) -> bool:
-    return d == 0.0 or _LO <= abs(d) <= _HI
+    Returns
+    -------
+    ndarray of int8, shape (m,)
+        ``incircle(a[i], b[i], c[i], d[i])`` for each row ``i`` of the
+        broadcast arrays, flattened to one dimension: ``+1`` inside, ``0`` on
+        the circle, ``-1`` outside.
 
+    Raises
+    ------
+    ValueError
+        If a row's ``a, b, c`` are collinear (the first such row is named), an
+        argument holds NaN, infinity, a number too large for a double or
+        non-numbers, or the shapes do not broadcast to ``(..., 2)``.
+    TypeError
+        If an argument is complex or a masked array.
 
-def _incircle_xy(
-    ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float
-) -> int:
-    """In-circle sign for Python floats, ``a, b, c`` counter-clockwise."""
-    adx, ady, bdx, bdy, cdx, cdy = ax - dx, ay - dy, bx - dx, by - dy, cx - dx, cy - dy
-    if all(_in_range(v) for v in (adx, ady, bdx, bdy, cdx, cdy)):
-        det, bound, permanent = _incircle_filter(adx, ady, bdx, bdy, cdx, cdy)
-        if det > bound:
-            return 1
-        if -det > bound:
-            return -1
-        if permanent == 0.0:
-            return 0
-    return _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy)
+    Notes
+    -----
+    The floating-point filter of :func:`incircle` is applied to all rows at
+    once and only the rows it cannot decide are recomputed exactly; integer
+    input beyond ``2**53`` is computed exactly throughout. The orientation of
+    each ``a, b, c`` is computed with :func:`reference.orient2d_many` and
+    multiplies the determinant, so the answer does not depend on it.
 
+    See Also
+    --------
+    incircle : the same predicate for one quadruple.
 
-def _incircle_xy_tame(
-    ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float
-) -> int:
-    """:func:`_incircle_xy` without range checks, for data accepted by ``_is_tame``."""
-    adx = ax - dx
-    ady = ay - dy
-    bdx = bx - dx
-    bdy = by - dy
-    cdx = cx - dx
-    cdy = cy - dy
-    bdxcdy = bdx * cdy
-    cdxbdy = cdx * bdy
-    cdxady = cdx * ady
-    adxcdy = adx * cdy
-    adxbdy = adx * bdy
-    bdxady = bdx * ady
-    alift = adx * adx + ady * ady
-    blift = bdx * bdx + bdy * bdy
-    clift = cdx * cdx + cdy * cdy
-    det = alift * (bdxcdy - cdxbdy) + blift * (cdxady - adxcdy) + clift * (adxbdy - bdxady)
-    bound = _ICC_ERRBOUND * (
-        (abs(bdxcdy) + abs(cdxbdy)) * alift
-        + (abs(cdxady) + abs(adxcdy)) * blift
-        + (abs(adxbdy) + abs(bdxady)) * clift
-    )
-    if det > bound:
-        return 1
-    if -det > bound:
-        return -1
-    if bound == 0.0:
-        return 0
-    return _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy)
+    References
+    ----------
+    .. [1] J. R. Shewchuk, "Adaptive precision floating-point arithmetic and
+       fast robust geometric predicates", Discrete & Computational Geometry
+       18, 305-363 (1997). :doi:`10.1007/PL00009321`
 
-
-def _incircle_many(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> NDArray[np.int8]:
-    """Vectorised in-circle sign over rows (``a, b, c`` counter-clockwise).
-
-    The same filter as the scalar predicate on every row at once; the rows
-    where it is inconclusive are decided with :class:`fractions.Fraction`.
+    Examples
+    --------
+    >>> from reference import incircle_many
+    >>> incircle_many([1, 0], [0, 1], [-1, 0], [[0, 0], [0, -1], [2, 2]])
+    array([ 1,  0, -1], dtype=int8)
     """
-    a, b, c, d = (np.asarray(v, dtype=np.float64) for v in (a, b, c, d))
-    a, b, c, d = (v.reshape(-1, 2) for v in np.broadcast_arrays(a, b, c, d))
-    with np.errstate(over="ignore", invalid="ignore", under="ignore"):
-        diffs = [a[:, 0] - d[:, 0], a[:, 1] - d[:, 1], b[:, 0] - d[:, 0],
-                 b[:, 1] - d[:, 1], c[:, 0] - d[:, 0], c[:, 1] - d[:, 1]]  # fmt: skip
-        ok = np.ones(a.shape[0], dtype=bool)
-        for v in diffs:
-            m = np.abs(v)
-            ok &= (m == 0.0) | ((m >= _LO) & (m <= _HI))
-        det, bound, permanent = _incircle_filter(*diffs)
-        sure = ok & ((np.abs(det) > bound) | (permanent == 0.0))
-    out = np.sign(np.where(sure, det, 0.0)).astype(np.int8)
-    rows = np.concatenate([a, b, c, d], axis=1)
-    for i in np.flatnonzero(~sure):
-        out[i] = _incircle_exact(*rows[i].tolist())
-    return out
+    arrays = [as_exact_array(v, name) for v, name in zip((a, b, c, d), "abcd")]
+    for v, name in zip(arrays, "abcd"):
+        if v.ndim == 0 or v.shape[-1] != 2:
+            raise ValueError(
+                f"`{name}` must hold points, an array of shape (..., 2); got {v.shape}."
+            )
+    try:
+        shape = np.broadcast_shapes(*(v.shape for v in arrays))
+    except ValueError:
+        shapes = ", ".join(str(v.shape) for v in arrays)
+        raise ValueError(
+            f"`a`, `b`, `c` and `d` must have shapes that broadcast together; got {shapes}."
+        ) from None
+    full = [np.broadcast_to(v, shape).reshape(-1, 2) for v in arrays]
+    turn = P.orient_many(*full[:3])
+    flat = np.flatnonzero(turn == 0)
+    if flat.size:
+        i = int(flat[0])
+        raise _collinear_error(
+            f"row {i}: a={full[0][i].tolist()}, b={full[1][i].tolist()}, c={full[2][i].tolist()}"
+        )
+    return (turn * P.incircle_many_ccw(*full)).astype(np.int8)
 
 
 def incircle(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> int:
@@ -225,7 +177,7 @@ def incircle(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> int:
 
     Examples
     --------
-    >>> from reference.delaunay import incircle
+    >>> from reference import incircle
     >>> incircle([1, 0], [0, 1], [-1, 0], [0, 0])
     1
     >>> incircle([1, 0], [0, 1], [-1, 0], [0, -1])
@@ -238,15 +190,17 @@ def incircle(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> int:
     >>> incircle([1, 0], [0, 1], [-1, 0], [0, -1 + 2.0**-53])
     1
     """
-    pts = [as_point(v, name) for v, name in ((a, "a"), (b, "b"), (c, "c"), (d, "d"))]
-    xy = [float(t) for p in pts for t in p]
-    orientation = _orient_xy(*xy[:6])
+    pts = [as_exact_point(v, name) for v, name in zip((a, b, c, d), "abcd")]
+    if P.is_exact_objects(*pts):
+        xy = [v for p in pts for v in P.to_objects(p).tolist()]
+        orient, inside = P.orient_num, P.incircle_num
+    else:
+        xy = [float(v) for p in pts for v in p]
+        orient, inside = P.orient_xy, P.incircle_xy
+    orientation = orient(*xy[:6])
     if orientation == 0:
-        raise ValueError(
-            "`a`, `b` and `c` must not be collinear (they define no circle); "
-            f"got a={xy[0:2]}, b={xy[2:4]}, c={xy[4:6]}."
-        )
-    return orientation * _incircle_xy(*xy)
+        raise _collinear_error(f"a={xy[0:2]}, b={xy[2:4]}, c={xy[4:6]}")
+    return orientation * inside(*xy)
 
 
 # ---------------------------------------------------------------------------
@@ -311,11 +265,10 @@ class _Triangulation:
     so points outside the hull are inserted like any other point.
     """
 
-    def __init__(self, xs: list[float], ys: list[float], tame: bool) -> None:
+    def __init__(self, xs: list[Any], ys: list[Any], mode: str) -> None:
         self.xs, self.ys = xs, ys
         self.g = len(xs)
-        self.orient = _orient_xy_tame if tame else _orient_xy
-        self.incircle = _incircle_xy_tame if tame else _incircle_xy
+        self.orient, self.incircle = _PREDICATES[mode]
         self.tv: list[tuple[int, int, int]] = []
         self.tn: list[list[int]] = []
         self.alive: list[bool] = []
@@ -450,12 +403,23 @@ class _Triangulation:
         return [v for v, ok in zip(self.tv, self.alive) if ok and v[2] != g]
 
 
-def _first_triangle(xs: list[float], ys: list[float], order: list[int]) -> tuple[int, int, int]:
+#: Predicates on Python numbers by kind of coordinates: doubles inside the
+#: filters' safe range, any doubles, exact ints/Fractions.
+_PREDICATES = {
+    "tame": (P.orient_xy_tame, P.incircle_xy_tame),
+    "float": (P.orient_xy, P.incircle_xy),
+    "exact": (P.orient_num, P.incircle_num),
+}
+
+
+def _first_triangle(
+    xs: list[Any], ys: list[Any], order: list[int], orient: Any
+) -> tuple[int, int, int]:
     """Positions in ``order`` of three points that are not collinear."""
     a, b = order[0], order[1]
     for k in range(2, len(order)):
         c = order[k]
-        if _orient_xy(xs[a], ys[a], xs[b], ys[b], xs[c], ys[c]) != 0:
+        if orient(xs[a], ys[a], xs[b], ys[b], xs[c], ys[c]) != 0:
             return 0, 1, k
     raise ValueError(
         "`points` must not be all collinear: their Delaunay triangulation has no "
@@ -527,7 +491,7 @@ def delaunay(points: ArrayLike) -> NDArray[np.intp]:
     Examples
     --------
     >>> import numpy as np
-    >>> from reference.delaunay import delaunay, is_delaunay
+    >>> from reference import delaunay, is_delaunay
     >>> pts = np.array([[0, 0], [2, 0], [1, 1.5], [1, -1.5]])
     >>> tri = delaunay(pts)
     >>> sorted(tuple(sorted(t)) for t in tri.tolist())
@@ -542,21 +506,23 @@ def delaunay(points: ArrayLike) -> NDArray[np.intp]:
     >>> tri.shape, is_delaunay(square, tri)
     ((2, 3), True)
     """
-    pts = as_points(points, "points")
-    ids = _sorted_unique(pts)
+    pts, approx = as_exact_points(points, "points")
+    ids = P.sorted_unique(pts)
     if ids.size < 3:
         raise ValueError(
             f"`points` must hold at least 3 distinct points; got {ids.size} distinct "
             f"among {pts.shape[0]}."
         )
     uniq = pts[ids]
-    order = _brio_order(uniq).tolist()
+    order = _brio_order(approx[ids]).tolist()  # any order is correct; rounding is harmless
     xs, ys = uniq[:, 0].tolist(), uniq[:, 1].tolist()
-    i, j, k = _first_triangle(xs, ys, order)
+    mode = "exact" if uniq.dtype == object else ("tame" if P.is_tame(uniq) else "float")
+    orient = _PREDICATES[mode][0]
+    i, j, k = _first_triangle(xs, ys, order, orient)
     a, b, c = order[i], order[j], order[k]
-    if _orient_xy(xs[a], ys[a], xs[b], ys[b], xs[c], ys[c]) < 0:
+    if orient(xs[a], ys[a], xs[b], ys[b], xs[c], ys[c]) < 0:
         a, b = b, a
-    mesh = _Triangulation(xs, ys, _is_tame(uniq))
+    mesh = _Triangulation(xs, ys, mode)
     mesh.start(a, b, c)
     for pos in range(2, len(order)):
         if pos != k:
@@ -617,7 +583,7 @@ def _boundary_is_convex_cycle(pts: NDArray[np.float64], start: NDArray, end: NDA
         return False
     u = np.asarray(cycle[:-1])
     v, w = np.roll(u, -1), np.roll(u, -2)
-    turn = _orient2d_many(pts[u], pts[v], pts[w])
+    turn = P.orient_many(pts[u], pts[v], pts[w])
     if np.any(turn < 0):
         return False
     d1 = _direction_signs(pts[u], pts[v])
@@ -665,7 +631,7 @@ def is_delaunay(points: ArrayLike, triangles: ArrayLike) -> bool:
 
     Notes
     -----
-    All tests are exact (:func:`reference.geometry.orient2d` and
+    All tests are exact (:func:`reference.orient2d` and
     :func:`incircle`).
 
     *A triangulation of the hull.* Each directed edge may occur once; an edge
@@ -698,7 +664,7 @@ def is_delaunay(points: ArrayLike, triangles: ArrayLike) -> bool:
 
     Examples
     --------
-    >>> from reference.delaunay import is_delaunay
+    >>> from reference import is_delaunay
     >>> pts = [[0, 0], [2, 0], [1, 1.5], [1, -1.5]]
     >>> is_delaunay(pts, [[0, 1, 2], [1, 0, 3]])
     True
@@ -707,11 +673,11 @@ def is_delaunay(points: ArrayLike, triangles: ArrayLike) -> bool:
     >>> is_delaunay(pts, [[0, 2, 1], [1, 0, 3]])  # first one clockwise
     False
     """
-    pts = as_points(points, "points")
+    pts, _ = as_exact_points(points, "points")
     tri = _as_triangles(triangles, pts.shape[0])
     if tri.shape[0] == 0:
         return False
-    if np.any(_orient2d_many(pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]) <= 0):
+    if np.any(P.orient_many(pts[tri[:, 0]], pts[tri[:, 1]], pts[tri[:, 2]]) <= 0):
         return False
     if not _covers_every_point(pts, tri):
         return False
@@ -732,5 +698,5 @@ def is_delaunay(points: ArrayLike, triangles: ArrayLike) -> bool:
     twin = order[pos[edge]]
     apex = tri.ravel()[(edge // 3) * 3 + (edge % 3 + 2) % 3]
     opposite = tri.ravel()[(twin // 3) * 3 + (twin % 3 + 2) % 3]
-    inside = _incircle_many(pts[start[edge]], pts[end[edge]], pts[apex], pts[opposite])
+    inside = P.incircle_many_ccw(pts[start[edge]], pts[end[edge]], pts[apex], pts[opposite])
     return bool(np.all(inside <= 0))

@@ -1,0 +1,306 @@
+"""The Dask backend: gradings on the workers of a Dask cluster (``--dask ADDRESS``).
+
+How a grading travels:
+
+* the client packs the assignment as one content-hashed bundle
+  (:mod:`autograder.bundle`) and registers :class:`GradingSlots`, a Dask worker
+  plugin, under a name holding the bundle's hash. On every worker, now and
+  whenever one joins or restarts, the plugin checks the sandbox (in a fresh
+  subprocess: a Dask worker is threaded and must not fork) and the engine,
+  unpacks the bundle in a private 0700 directory the sandbox never lets student
+  code read, and opens one :class:`~autograder.grading.Grader` (its warm worker
+  is started with ``subprocess``). A worker that fails a check sets its
+  ``grading`` resource to 0, so no grading goes there, and the client says why.
+* each task asks for one ``grading`` resource, takes the submission's bytes and
+  returns the result as plain data (the ``results.json`` dict and the bytes of
+  the files beside it); only the client writes files, atomically, as results
+  arrive, so no shared file system is needed.
+* a student's time-out or crash is a result, never a task error, so Dask never
+  retries a student's infinite loop; a worker that dies mid-grade makes Dask run
+  the task elsewhere (``distributed.scheduler.allowed-failures`` times), then the
+  client records an ``error`` result, retried on the next run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from dataclasses import replace
+from pathlib import Path, PurePosixPath
+from typing import Any, Sequence
+
+import distributed
+from distributed import Client, LocalCluster, Nanny, WorkerPlugin, get_worker, wait
+from distributed.security import Security
+
+from autograder.assignment import Assignment
+from autograder.backends import DaskSpec, Finished, Job, TLSFiles, check_address
+from autograder.batch import client_key, error_result, store_error
+from autograder.bundle import Bundle, engine_fingerprint, make_bundle, private_directory, remove_directory
+from autograder.errors import EngineError, UsageError
+from autograder.feedback import write_feedback
+from autograder.grading import Grader, GradingOptions
+from autograder.report import RESULTS_NAME, atomic_write_bytes, write_result
+from autograder.results import SubmissionResult
+
+log = logging.getLogger("autograder.dask")
+
+#: the Dask resource each grading task asks for; a worker offers one per slot
+RESOURCE = "grading"
+#: files a payload may not bring (the client writes these itself)
+_CLIENT_FILES = frozenset({RESULTS_NAME, "feedback.html"})
+
+
+def sandbox_notes() -> tuple[str, ...]:
+    """This machine's missing protections, probed in a fresh Python process.
+
+    :func:`autograder.sandbox.probe_support` forks to try a namespace; a Dask
+    worker has threads, so the probe runs in a new interpreter instead.
+    """
+    code = ("import json; from autograder.sandbox import probe_support; "
+            "print(json.dumps(list(probe_support().notes)))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, stdin=subprocess.DEVNULL)
+    if done.returncode != 0:
+        raise EngineError("The sandbox could not be probed on this worker: "
+                          + (done.stderr.strip().splitlines() or ["no output"])[-1])
+    return tuple(json.loads(done.stdout.strip().splitlines()[-1]))
+
+
+class GradingSlots(WorkerPlugin):
+    """Opens one warm grading slot on a Dask worker for one assignment bundle."""
+
+    def __init__(self, bundle: Bundle, options: GradingOptions, fingerprint: str,
+                 client_notes: tuple[str, ...]) -> None:
+        self.name = f"numgrade-{bundle.digest[:16]}"
+        self.bundle = bundle
+        self.options = options
+        self.fingerprint = fingerprint
+        self.client_notes = client_notes
+        self.problem = ""
+        self._grader: Grader | None = None
+        self._home: Path | None = None
+        self._lock = threading.Lock()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state.update(_grader=None, _home=None, _lock=None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
+
+    async def setup(self, worker: distributed.Worker) -> None:
+        try:
+            await asyncio.to_thread(self._prepare)
+        except Exception as exc:  # this worker cannot grade: take it out of the grading pool
+            self.problem = f"worker {worker.address} cannot grade: {exc}"
+            log.error("%s", self.problem)
+            await worker.set_resources(**{RESOURCE: 0})
+
+    def _prepare(self) -> None:
+        if engine_fingerprint() != self.fingerprint:
+            raise EngineError("its autograder or reference package differs from the client's; "
+                              "install the same version of numgrade on both")
+        extra = sorted(set(sandbox_notes()) - set(self.client_notes))
+        if extra:
+            raise EngineError("its sandbox is weaker than the client's: " + " ".join(extra))
+        self._home = private_directory()
+        assignment = self.bundle.unpack(self._home / "assignment")
+        self._grader = Grader(assignment, self.options)
+
+    def teardown(self, worker: distributed.Worker) -> None:
+        if self._grader is not None:
+            self._grader.close()
+            self._grader = None
+        if self._home is not None:
+            remove_directory(self._home)
+            self._home = None
+
+    def grade(self, data: bytes, filename: str, sub_id: str) -> dict[str, Any]:
+        """Grade one submission's bytes; return ``{"result": dict, "files": {path: bytes}}``."""
+        if self._grader is None or self._home is None:
+            raise EngineError(self.problem or "the grading slot of this worker is not open")
+        with self._lock:  # one grading at a time per slot, whatever the worker's threads
+            work = self._home / "work" / uuid.uuid4().hex
+            source, out = work / "submission" / Path(filename).name, work / "out"
+            source.parent.mkdir(parents=True, mode=0o700)
+            try:
+                source.write_bytes(data)
+                try:
+                    result = self._grader.grade(source, id=sub_id, out_dir=out)
+                except Exception as exc:  # the grader's own failure is a result, not a task error
+                    result = error_result(self._grader.assignment, source, sub_id, exc)
+                files = {p.relative_to(out).as_posix(): p.read_bytes()
+                         for p in sorted(out.rglob("*")) if p.is_file()
+                         and p.relative_to(out).as_posix() not in _CLIENT_FILES} if out.exists() else {}
+                return {"result": result.to_dict(), "files": files}
+            finally:
+                remove_directory(work)
+
+
+def grade_task(plugin_name: str, data: bytes, filename: str, sub_id: str) -> dict[str, Any]:
+    """The task run on a worker: find this assignment's slot and grade ``data`` there."""
+    plugin = get_worker().plugins.get(plugin_name)
+    if not isinstance(plugin, GradingSlots):
+        raise EngineError(f"worker {get_worker().address} has no grading slot for this run")
+    return plugin.grade(data, filename, sub_id)
+
+
+def _slot_problem(plugin_name: str, dask_worker: distributed.Worker) -> str:
+    plugin = dask_worker.plugins.get(plugin_name)
+    return "no grading plugin" if plugin is None else getattr(plugin, "problem", "")
+
+
+def security_for(tls: TLSFiles | None, *, role: str = "client") -> Security | None:
+    if tls is None:
+        return None
+    key = str(tls.key) if tls.key is not None else None
+    return Security(require_encryption=True, tls_ca_file=str(tls.ca_file),
+                    **{f"tls_{role}_cert": str(tls.cert), f"tls_{role}_key": key})
+
+
+def store_payload(out_dir: Path, job: Job, payload: Any, assignment: Assignment, key: str) -> SubmissionResult:
+    """Write what a worker sent for ``job``: its files, then ``results.json``, then the feedback page."""
+    result = SubmissionResult.from_dict(payload["result"])
+    folder = out_dir / job.id
+    for name, data in payload.get("files", {}).items():
+        relative = PurePosixPath(name)
+        if relative.is_absolute() or ".." in relative.parts or name in _CLIENT_FILES \
+                or not isinstance(data, bytes):
+            raise EngineError(f"a worker sent a file named {name!r} for {job.id}; refused")
+        atomic_write_bytes(folder / relative, data)
+    result = replace(result, id=job.id, source=str(job.path),
+                     key=key if result.outcome != "error" else "")
+    write_result(folder, result)
+    write_feedback(folder, result, title=assignment.title)
+    return result
+
+
+class DaskBackend:
+    """Grades on a Dask cluster; ``local:N`` starts one of N processes here for the run."""
+
+    def __init__(self, spec: DaskSpec) -> None:
+        self.spec = spec
+
+    def _connect(self) -> tuple[LocalCluster | None, Client]:
+        workers = self.spec.local_workers
+        if workers is not None:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   host="127.0.0.1", dashboard_address=None,
+                                   resources={RESOURCE: 1}, silence_logs=logging.ERROR)
+            return cluster, Client(cluster)
+        try:
+            return None, Client(self.spec.address, security=security_for(self.spec.tls), timeout=30)
+        except (OSError, TimeoutError) as exc:
+            raise UsageError(f"Could not reach the Dask scheduler at {self.spec.address}: {exc}. "
+                             "Is it running, and is the address right?") from None
+
+    def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
+            out_dir: Path, finished: Finished) -> None:
+        from autograder.sandbox import probe_support
+
+        cluster, client = self._connect()
+        plugin = GradingSlots(make_bundle(assignment), options, engine_fingerprint(),
+                              probe_support().notes)
+        try:
+            client.register_plugin(plugin, name=plugin.name)
+            self._say_worker_problems(client, plugin.name)
+            futures = {client.submit(grade_task, plugin.name, job.path.read_bytes(), job.path.name,
+                                     job.id, key=f"grade-{job.id}-{uuid.uuid4().hex[:8]}",
+                                     resources={RESOURCE: 1}, pure=False): job for job in jobs}
+            self._collect(client, futures, assignment, options, out_dir, finished)
+        finally:
+            try:
+                if cluster is None:  # a shared cluster: close this run's slots on every worker
+                    client.unregister_worker_plugin(plugin.name)
+            except Exception as exc:  # the run's results are written; say so, do not fail it
+                log.warning("could not close the grading slots on the workers: %s", exc)
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+    @staticmethod
+    def _say_worker_problems(client: Client, name: str) -> None:
+        problems = {w: p for w, p in client.run(_slot_problem, name).items() if p}
+        for problem in problems.values():
+            print(f"autograder: warning: {problem}", file=sys.stderr)
+        workers = client.scheduler_info()["workers"]
+        if workers and len(problems) == len(workers):
+            raise EngineError("No Dask worker can grade: " + "; ".join(problems.values()))
+        if not workers:
+            print("autograder: note: no Dask worker is connected yet; gradings start when one "
+                  "joins (autograder worker ADDRESS --slots N).", file=sys.stderr)
+
+    def _collect(self, client: Client, futures: dict[Any, Job], assignment: Assignment,
+                 options: GradingOptions, out_dir: Path, finished: Finished) -> None:
+        pending = set(futures)
+        last = time.monotonic()
+        while pending:
+            try:
+                done, pending = wait(pending, timeout=self.spec.warn_after, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                quiet = time.monotonic() - last
+                slots = sum(w.get("resources", {}).get(RESOURCE, 0)
+                            for w in client.scheduler_info()["workers"].values())
+                print(f"autograder: warning: no result arrived for {quiet:.0f} s; {len(pending)} "
+                      f"submission(s) still to grade on {slots:g} grading slot(s).", file=sys.stderr)
+                continue
+            last = time.monotonic()
+            for future in done:
+                finished(self._store(future, futures[future], assignment, options, out_dir))
+
+    @staticmethod
+    def _store(future: Any, job: Job, assignment: Assignment, options: GradingOptions,
+               out_dir: Path) -> SubmissionResult:
+        if future.status == "finished":
+            try:
+                return store_payload(out_dir, job, future.result(), assignment,
+                                     client_key(job.path, assignment, options))
+            except (KeyError, TypeError, ValueError, EngineError) as exc:
+                problem: BaseException | str = exc
+        else:
+            exc = future.exception()
+            problem = (f"the Dask workers grading it stopped ({type(exc).__name__}: {exc})"
+                       if isinstance(exc, distributed.KilledWorker) else exc)
+        return store_error(out_dir, error_result(assignment, job.path, job.id, problem),
+                           assignment.title)
+
+
+# ------------------------------------------------------------------ the worker command
+
+
+def run_worker(address: str, *, slots: int, tls: TLSFiles | None = None,
+               insecure: bool = False) -> None:
+    """Run ``slots`` Dask worker processes (one grading slot each) until stopped.
+
+    Each is a Dask ``Nanny`` with one thread and one ``grading`` resource; the
+    nanny restarts its worker if it dies, and the client's plugin opens the
+    worker's slot again.
+    """
+    check_address(address, tls=tls, insecure=insecure)
+    if address.startswith("local:"):
+        raise UsageError("`autograder worker` joins a running scheduler: give its address "
+                         "(tls://HOST:PORT, or tcp://127.0.0.1:PORT on this machine).")
+    asyncio.run(_serve(address, slots, security_for(tls, role="worker")))
+
+
+async def _serve(address: str, slots: int, security: Security | None) -> None:
+    nannies = [Nanny(address, nthreads=1, resources={RESOURCE: 1}, security=security)
+               for _ in range(slots)]
+    await asyncio.gather(*(n.start() for n in nannies))
+    try:
+        await asyncio.gather(*(n.finished() for n in nannies))
+    finally:
+        await asyncio.gather(*(n.close() for n in nannies), return_exceptions=True)
+
+
+__all__ = ["DaskBackend", "GradingSlots", "grade_task", "run_worker", "sandbox_notes",
+           "security_for", "store_payload"]

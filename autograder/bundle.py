@@ -1,0 +1,115 @@
+"""The assignment as one content-hashed archive, for graders on other machines.
+
+A remote grader needs the assignment folder (``assignment.toml``, the checks,
+the data) but shares no file system with the instructor's machine. The folder
+travels as one reproducible tar archive whose name is the SHA-256 of its bytes:
+the same folder gives the same archive on every machine, so a worker can tell
+that it grades with exactly the checks the client has.
+
+The archive is unpacked into a fresh private directory (mode 0700, outside
+every path the sandbox lets student code read) and loaded from there.
+"""
+
+from __future__ import annotations
+
+import functools
+import gzip
+import hashlib
+import io
+import os
+import shutil
+import tarfile
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import autograder
+from autograder.assignment import Assignment, load_assignment
+from autograder.errors import AssignmentError
+
+#: what never travels: caches and editor leftovers
+_SKIPPED_DIRS = frozenset({"__pycache__", ".ipynb_checkpoints", ".pytest_cache", ".git"})
+_SKIPPED_SUFFIXES = (".pyc", ".pyo")
+
+
+@dataclass(frozen=True)
+class Bundle:
+    """An assignment folder packed as a reproducible ``tar.gz``."""
+
+    name: str  # the folder's name, which is the assignment's root folder name when unpacked
+    data: bytes
+    digest: str  # SHA-256 of ``data``
+
+    def unpack(self, into: Path) -> Assignment:
+        """Unpack under ``into`` (created 0700) after checking the digest; load the assignment."""
+        if hashlib.sha256(self.data).hexdigest() != self.digest:
+            raise AssignmentError("The assignment bundle is damaged (its SHA-256 does not match "
+                                  "its name); grade again to send it anew.")
+        into.mkdir(mode=0o700, parents=True, exist_ok=True)
+        os.chmod(into, 0o700)
+        target = into / self.digest[:16]
+        if not (target / self.name / "assignment.toml").exists():
+            staging = Path(tempfile.mkdtemp(dir=into, prefix=".unpack-"))
+            with tarfile.open(fileobj=io.BytesIO(self.data), mode="r:gz") as archive:
+                archive.extractall(staging, filter="data")
+            staging.rename(target)
+        return load_assignment(target / self.name)
+
+
+def _files(root: Path) -> list[Path]:
+    found = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if d not in _SKIPPED_DIRS)
+        for name in sorted(filenames):
+            if not name.endswith(_SKIPPED_SUFFIXES):
+                found.append(Path(dirpath) / name)
+    return found
+
+
+def make_bundle(assignment: Assignment) -> Bundle:
+    """Pack ``assignment.root`` reproducibly: sorted entries, zero times and owners, fixed modes."""
+    root = assignment.root.resolve()
+    buffer = io.BytesIO()
+    # gzip's header time is fixed too (mtime=0), so equal folders give equal bytes
+    with gzip.GzipFile(fileobj=buffer, mode="wb", mtime=0, compresslevel=6) as packed, \
+            tarfile.open(fileobj=packed, mode="w", format=tarfile.PAX_FORMAT) as archive:
+        for path in _files(root):
+            info = tarfile.TarInfo(f"{root.name}/{path.relative_to(root).as_posix()}")
+            data = path.read_bytes()
+            info.size, info.mtime, info.mode = len(data), 0, 0o644
+            info.uid = info.gid = 0
+            info.uname = info.gname = ""
+            archive.addfile(info, io.BytesIO(data))
+    data = buffer.getvalue()
+    return Bundle(name=root.name, data=data, digest=hashlib.sha256(data).hexdigest())
+
+
+@functools.cache
+def engine_fingerprint() -> str:
+    """SHA-256 over the sources of ``autograder`` and ``reference`` and the engine version.
+
+    A worker compares it with the client's before grading: a different engine or
+    reference package could give different scores under the same result key.
+    """
+    import reference  # the model solutions the checks import
+
+    digest = hashlib.sha256(autograder.__version__.encode())
+    for package in (autograder, reference):
+        top = Path(package.__file__).resolve().parent
+        for path in _files(top):
+            if path.suffix == ".py" or path.parent.name == "templates":
+                digest.update(f"\0{package.__name__}/{path.relative_to(top).as_posix()}\0".encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def private_directory(prefix: str = "autograder-bundle-") -> Path:
+    """A fresh 0700 directory under the system's temporary folder, for unpacked bundles."""
+    return Path(tempfile.mkdtemp(prefix=prefix))
+
+
+def remove_directory(path: Path) -> None:
+    shutil.rmtree(path, ignore_errors=True)
+
+
+__all__ = ["Bundle", "engine_fingerprint", "make_bundle", "private_directory", "remove_directory"]

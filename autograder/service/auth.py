@@ -1,0 +1,147 @@
+"""Sign-in: access tokens (stored hashed), browser sessions with a CSRF token, roster import."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import hmac
+import io
+import secrets
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from autograder.errors import UsageError
+from autograder.service.models import User, WebSession
+
+ROLES = ("student", "ta", "instructor")
+STAFF = ("ta", "instructor")
+
+
+def new_token() -> str:
+    """A fresh access token: 192 random bits, URL-safe."""
+    return secrets.token_urlsafe(24)
+
+
+def token_hash(token: str) -> str:
+    """SHA-256 of a token. Tokens are random (not passwords), so no slow hash is needed."""
+    return hashlib.sha256(token.encode("utf-8")).hexdigest()
+
+
+def user_for_token(session: Session, token: str) -> User | None:
+    if not token or len(token) > 200:
+        return None
+    return session.scalars(select(User).where(User.token_hash == token_hash(token))).first()
+
+
+@dataclass(frozen=True)
+class SignedIn:
+    """The browser session: who, and the CSRF token its forms must carry."""
+
+    user_id: str
+    role: str
+    csrf: str
+
+
+def open_session(session: Session, user: User) -> str:
+    """Start a browser session for ``user``; return the cookie value."""
+    cookie = secrets.token_urlsafe(32)
+    session.add(WebSession(id_hash=token_hash(cookie), user_id=user.id,
+                           csrf=secrets.token_urlsafe(24)))
+    return cookie
+
+
+def find_session(session: Session, cookie: str | None) -> SignedIn | None:
+    if not cookie or len(cookie) > 200:
+        return None
+    row = session.get(WebSession, token_hash(cookie))
+    if row is None:
+        return None
+    user = session.get(User, row.user_id)
+    return None if user is None else SignedIn(user.id, user.role, row.csrf)
+
+
+def close_session(session: Session, cookie: str | None) -> None:
+    if cookie:
+        row = session.get(WebSession, token_hash(cookie))
+        if row is not None:
+            session.delete(row)
+
+
+def same_secret(given: str | None, expected: str) -> bool:
+    return given is not None and hmac.compare_digest(given.encode(), expected.encode())
+
+
+@dataclass(frozen=True)
+class RosterEntry:
+    id: str
+    name: str
+    email: str
+    role: str
+
+
+def read_roster(path: Path) -> list[RosterEntry]:
+    """Rows of a roster CSV with columns ``id, name, email`` (and optionally ``role``)."""
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise UsageError(f"Cannot read the roster {str(path)!r}: {exc.strerror}.") from None
+    reader = csv.DictReader(io.StringIO(text))
+    missing = {"id", "name", "email"} - set(reader.fieldnames or ())
+    if missing:
+        raise UsageError(f"{path}: the roster needs the columns id, name, email (and optionally "
+                         f"role); missing {sorted(missing)}.")
+    entries: list[RosterEntry] = []
+    for line, row in enumerate(reader, start=2):
+        sid = (row.get("id") or "").strip()
+        role = (row.get("role") or "student").strip() or "student"
+        if not sid or len(sid) > 128:
+            raise UsageError(f"{path}, line {line}: every row needs an id (at most 128 characters).")
+        if role not in ROLES:
+            raise UsageError(f"{path}, line {line}: role must be one of {', '.join(ROLES)}; got {role!r}.")
+        entries.append(RosterEntry(sid, (row.get("name") or "").strip(),
+                                   (row.get("email") or "").strip(), role))
+    ids = [e.id for e in entries]
+    if len(set(ids)) != len(ids):
+        raise UsageError(f"{path}: ids must be unique in the roster.")
+    return entries
+
+
+def import_roster(session: Session, entries: Iterable[RosterEntry]) -> list[tuple[User, str]]:
+    """Add or update roster entries; new users get a token. Return (user, token) for those."""
+    issued: list[tuple[User, str]] = []
+    for entry in entries:
+        user = session.get(User, entry.id)
+        if user is None:
+            user = User(id=entry.id, name=entry.name, email=entry.email, role=entry.role)
+            session.add(user)
+        else:
+            user.name, user.email, user.role = entry.name, entry.email, entry.role
+        if user.token_hash is None:
+            token = new_token()
+            user.token_hash = token_hash(token)
+            issued.append((user, token))
+    return issued
+
+
+def issue_tokens(session: Session, *, everyone: bool) -> list[tuple[User, str]]:
+    """New tokens for users without one (or for everyone, which revokes the old ones)."""
+    issued: list[tuple[User, str]] = []
+    for user in session.scalars(select(User).order_by(User.id)):
+        if everyone or user.token_hash is None:
+            token = new_token()
+            user.token_hash = token_hash(token)
+            issued.append((user, token))
+    return issued
+
+
+def tokens_csv(issued: Iterable[tuple[User, str]]) -> str:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["id", "name", "email", "role", "token"])
+    for user, token in issued:
+        writer.writerow([user.id, user.name, user.email, user.role, token])
+    return buffer.getvalue()

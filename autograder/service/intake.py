@@ -1,0 +1,108 @@
+"""Accepting an upload: every check first, then one transaction (store, submission, job).
+
+A rejected upload (too large, not a notebook, closed assignment, too many this
+hour) gets a clear message and leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+import tempfile
+from pathlib import Path
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, sessionmaker
+
+from autograder.errors import NotebookError, UsageError
+from autograder.notebook import read_notebook
+from autograder.service import queue
+from autograder.service.course import Course
+from autograder.service.models import Submission, User, utcnow
+from autograder.service.standing import deadline_for
+from autograder.service.storage import Storage
+
+
+class UploadRejected(UsageError):
+    """An upload the service refuses; ``status`` is the HTTP status to answer with."""
+
+    def __init__(self, message: str, *, status: int = 400, retry_after: int | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+        self.retry_after = retry_after
+
+
+def check_notebook(data: bytes, max_bytes: int) -> None:
+    """Raise :class:`UploadRejected` unless ``data`` is a notebook the engine can read."""
+    if len(data) > max_bytes:
+        raise UploadRejected(f"The file is {len(data) / 1e6:.1f} MB; uploads may be at most "
+                             f"{max_bytes / 1e6:.1f} MB. Clear the notebook's outputs "
+                             "(Kernel > Restart & Clear Output) and upload it again.", status=413)
+    if not data.strip():
+        raise UploadRejected("The file is empty; upload your .ipynb notebook.")
+    with tempfile.TemporaryDirectory(prefix="autograder-upload-") as folder:
+        path = Path(folder) / "upload.ipynb"
+        path.write_bytes(data)
+        try:
+            read_notebook(path, max_bytes=max_bytes)
+        except NotebookError as exc:
+            raise UploadRejected(f"This is not a notebook the grader can read: {exc}",
+                                 status=422) from None
+
+
+def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, user_id: str,
+           assignment: str, filename: str, data: bytes,
+           now: dt.datetime | None = None) -> Submission:
+    """Check an upload and queue it; raise :class:`UploadRejected` with the reason otherwise."""
+    policy = course.assignment(assignment)
+    if policy is None:
+        raise UploadRejected(f"There is no assignment {assignment!r} in this course.", status=404)
+    if len(data) > course.max_upload_bytes:  # before parsing anything
+        check_notebook(data, course.max_upload_bytes)
+    now = now or utcnow()
+    with factory() as session:
+        _check_open(session, policy, user_id, now)
+    check_notebook(data, course.max_upload_bytes)
+    with factory.begin() as session:
+        session.execute(select(User).where(User.id == user_id).with_for_update()).scalar_one()
+        deadline = _check_open(session, policy, user_id, now)
+        _check_rate(session, course, user_id, assignment, now)
+        sha = storage.store(data)
+        late = policy.late_days(now, deadline)
+        submission = Submission(user_id=user_id, assignment=assignment, sha256=sha,
+                                filename=Path(filename or "notebook.ipynb").name[:256],
+                                submitted_at=now, late_days=late, penalty=policy.penalty(late),
+                                status="queued")
+        session.add(submission)
+        session.flush()
+        queue.enqueue(session, submission.id)
+    return submission
+
+
+def _check_open(session: Session, policy, user_id: str, now: dt.datetime) -> dt.datetime:
+    deadline = deadline_for(session, policy, user_id)
+    if now < policy.opens:
+        raise UploadRejected(f"{policy.title} opens on {policy.opens:%Y-%m-%d %H:%M} UTC; "
+                             "nothing was stored.", status=409)
+    closes = policy.closes_for(deadline)
+    if now >= closes:
+        raise UploadRejected(f"{policy.title} closed on {closes:%Y-%m-%d %H:%M} UTC (deadline "
+                             f"{deadline:%Y-%m-%d %H:%M} UTC plus {policy.max_late_days} late "
+                             "day(s)); nothing was stored. Ask your instructor for an extension.",
+                             status=409)
+    return deadline
+
+
+def _check_rate(session: Session, course: Course, user_id: str, assignment: str,
+                now: dt.datetime) -> None:
+    hour_ago = now - dt.timedelta(hours=1)
+    recent = session.execute(
+        select(func.count(), func.min(Submission.submitted_at))
+        .where(Submission.user_id == user_id, Submission.assignment == assignment,
+               Submission.submitted_at > hour_ago)).one()
+    if recent[0] >= course.submissions_per_hour:
+        wait = max(1, math.ceil((recent[1] + dt.timedelta(hours=1) - now).total_seconds()))
+        raise UploadRejected(
+            f"You have submitted {recent[0]} times in the last hour; the limit is "
+            f"{course.submissions_per_hour} per hour. Try again in {math.ceil(wait / 60)} minute(s).",
+            status=429, retry_after=wait)

@@ -1,0 +1,97 @@
+"""Starting the service: migrate the database, import the roster once, start graders and uvicorn."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import secrets
+from pathlib import Path
+
+from sqlalchemy import func, select
+
+from autograder.assignment import load_assignment
+from autograder.service import auth
+from autograder.service.course import Course, load_course
+from autograder.service.db import make_engine, sessions, upgrade
+from autograder.service.models import User
+from autograder.service.workers import GradingPool, WorkerSettings
+
+
+def open_course(course_path: str | Path, *, database: str | None = None) -> Course:
+    """Load the course file (with ``database`` overriding its URL) and check every assignment loads."""
+    course = load_course(course_path)
+    if database:
+        course = dataclasses.replace(course, database_url=database)
+    for policy in course.assignments:
+        load_assignment(policy.spec)  # fails now, with the loader's message, not at the first upload
+    course.data_dir.mkdir(parents=True, exist_ok=True)
+    return course
+
+
+def import_roster(course: Course, roster: Path, *, tokens_out: Path | None = None) -> tuple[int, Path | None]:
+    """Import ``roster`` into the course database; write new users' tokens to a CSV (mode 0600).
+
+    Returns the number of roster rows and the tokens file (``None`` when nobody
+    needed a new token).
+    """
+    engine = make_engine(course.database_url)
+    try:
+        upgrade(engine)
+        entries = auth.read_roster(roster)
+        with sessions(engine).begin() as session:
+            issued = auth.import_roster(session, entries)
+            text = auth.tokens_csv(issued)
+        if not issued:
+            return len(entries), None
+        out = tokens_out or course.data_dir / "tokens.csv"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(out, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        return len(entries), out
+    finally:
+        engine.dispose()
+
+
+def _secret(course: Course) -> bytes:
+    """A per-course secret kept beside the data (for CSRF tokens of proxy-signed-in users)."""
+    path = course.data_dir / "secret.key"
+    if not path.exists():
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(secrets.token_bytes(32))
+    return path.read_bytes()
+
+
+def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
+          database: str | None = None, jobs: int | None = None,
+          lease_seconds: float | None = None, say: bool = True) -> None:
+    """Run the service until interrupted (see ``autograder serve --help``)."""
+    import uvicorn
+
+    from autograder.service.app import create_app
+
+    course = open_course(course_path, database=database)
+    engine = make_engine(course.database_url)
+    upgrade(engine)
+    factory = sessions(engine)
+    with factory() as session:
+        empty = session.scalar(select(func.count()).select_from(User)) == 0
+    if empty and course.roster is not None:
+        count, tokens = import_roster(course, course.roster)
+        if say:
+            print(f"Imported {count} people from {course.roster}; their access tokens are in "
+                  f"{tokens} (only there: the database keeps hashes).", flush=True)
+    settings = WorkerSettings(course_path=str(course.path), database_url=course.database_url,
+                              **({"lease_seconds": lease_seconds} if lease_seconds else {}))
+    pool = GradingPool(settings, jobs or max(1, (os.cpu_count() or 2)))
+    pool.start()
+    if say:
+        print(f"Serving {course.name} on http://{host}:{port}/ with {pool.jobs} grading "
+              f"process(es); database {engine.url.render_as_string(hide_password=True)}.", flush=True)
+    try:
+        uvicorn.run(create_app(course, factory, secret=_secret(course)), host=host, port=port,
+                    log_level="warning", access_log=False)
+    finally:
+        pool.stop()
+        engine.dispose()

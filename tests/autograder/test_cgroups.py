@@ -1,0 +1,226 @@
+"""Tests of :mod:`autograder.cgroups` and of the sweeps that end a slot's processes.
+
+The "hydra" below re-forks itself in a new session as fast as it can, so its pid
+changes all the time: a sweep that lists ``/proc`` and then kills what it listed
+misses it. Each sweep must leave nothing, and the check is repeated after a pause
+so that a survivor would have had time to show up.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from autograder import cgroups
+from autograder.sandbox import IsolationPolicy, enter_sandbox, probe_support
+from autograder.session import _descendants, kill_descendants, kill_user, slot_lock_dir
+
+SLOT = 9  # tests never claim slots: use one the quick tests do not use
+HYDRA_UID = 61990
+DEADLINE = 20.0
+
+
+def require_root(what: str) -> None:
+    if not probe_support().is_root:
+        pytest.skip(f"Not running as root: {what} needs root.")
+
+
+def require_cgroups() -> cgroups.SlotCgroup:
+    require_root("a cgroup per slot")
+    group = cgroups.slot_cgroup(SLOT, processes=64)
+    if group is None:
+        pytest.skip(f"No usable cgroup hierarchy here: {cgroups.cgroup_support()}")
+    return group
+
+
+def hydra() -> None:
+    """Fork, let the parent exit, start a new session in the child; forever."""
+    while True:
+        try:
+            pid = os.fork()
+        except OSError:  # at the process limit: try again
+            continue
+        if pid:
+            os._exit(0)
+        try:
+            os.setsid()
+        except OSError:
+            pass
+
+
+def uid_processes(uid: int) -> list[int]:
+    found = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                lines = Path(f"/proc/{name}/status").read_text().splitlines()
+            except OSError:
+                continue
+            fields = dict(line.split(":", 1) for line in lines if ":" in line)
+            if int(fields["Uid"].split()[0]) == uid and fields["State"].split()[0] != "Z":
+                found.append(int(name))
+    return found
+
+
+def wait_until(condition, what: str) -> None:  # type: ignore[no-untyped-def]
+    end = time.monotonic() + DEADLINE
+    while not condition():
+        if time.monotonic() > end:
+            pytest.fail(f"timed out waiting for {what}")
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def reaped() -> Iterator[list[int]]:
+    """Pids forked by a test; reaped (and killed if needed) at the end."""
+    pids: list[int] = []
+    yield pids
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+        try:
+            os.waitpid(pid, 0)
+        except ChildProcessError:
+            pass
+
+
+# ----------------------------------------------------------------------- cgroups
+
+def test_every_slot_gets_the_same_cpu_weight() -> None:
+    group = require_cgroups()
+    other = cgroups.slot_cgroup(SLOT + 1, processes=64)
+    assert other is not None
+    for name in ("cpu.shares", "cpu.weight"):
+        values = {(d / name).read_text() for g in (group, other) for d in g.dirs if (d / name).exists()}
+        assert len(values) <= 1, f"{name} differs between slots: {values}"
+    assert any((d / "cpu.shares").exists() or (d / "cpu.weight").exists() for d in group.dirs)
+
+
+def test_child_enters_its_slot_cgroup(tmp_path: Path, reaped: list[int]) -> None:
+    group = require_cgroups()
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            enter_sandbox(IsolationPolicy(), tmp_path, slot=SLOT)
+            os.write(write_fd, Path("/proc/self/cgroup").read_bytes())
+        finally:
+            os._exit(0)
+    reaped.append(pid)
+    os.close(write_fd)
+    with os.fdopen(read_fd, "rb") as pipe:
+        text = pipe.read().decode()
+    assert f"/{cgroups.GROUP}/slot-{SLOT}" in text, text
+
+
+def test_kill_all_ends_a_process_that_reforks(reaped: list[int]) -> None:
+    group = require_cgroups()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            group.join()
+            os.setresuid(HYDRA_UID, HYDRA_UID, HYDRA_UID)
+            hydra()
+        finally:
+            os._exit(0)
+    reaped.append(pid)
+    wait_until(lambda: len(group.pids()) > 0, "the hydra to start")
+    time.sleep(0.2)  # let it re-fork a few thousand times
+    assert group.kill_all()
+    time.sleep(0.2)
+    assert group.pids() == set()
+    assert uid_processes(HYDRA_UID) == []
+
+
+def test_pids_max_caps_the_slot(reaped: list[int]) -> None:
+    group = require_cgroups()
+    limit = cgroups.slot_cgroup(SLOT, processes=5)
+    assert limit is not None
+    pids_dir = next((d for d in group.dirs if (d / "pids.max").exists()), None)
+    if pids_dir is None:
+        pytest.skip("the pids controller is not mounted")
+    assert (pids_dir / "pids.max").read_text().strip() == "5"
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        count = 0
+        try:
+            group.join()
+            try:
+                for _ in range(50):
+                    if os.fork() == 0:
+                        time.sleep(30)
+                        os._exit(0)
+                    count += 1
+            except OSError:
+                pass
+            os.write(write_fd, str(count).encode())
+        finally:
+            os._exit(0)
+    reaped.append(pid)
+    os.close(write_fd)
+    with os.fdopen(read_fd, "rb") as pipe:
+        forked = int(pipe.read() or b"-1")
+    group.kill_all()
+    cgroups.slot_cgroup(SLOT, processes=64)
+    assert 0 <= forked < 5
+
+
+# ------------------------------------------------------------------------ sweeps
+
+def test_kill_user_ends_a_process_that_reforks(reaped: list[int]) -> None:
+    require_root("a user of the slot's own")
+    pid = os.fork()
+    if pid == 0:
+        try:
+            os.setresuid(HYDRA_UID, HYDRA_UID, HYDRA_UID)
+            hydra()
+        finally:
+            os._exit(0)
+    reaped.append(pid)
+    wait_until(lambda: uid_processes(HYDRA_UID), "the hydra to start")
+    time.sleep(0.2)
+    assert kill_user(HYDRA_UID)
+    time.sleep(0.2)
+    assert uid_processes(HYDRA_UID) == []
+
+
+def test_kill_descendants_ends_a_process_that_reforks(reaped: list[int]) -> None:
+    """The non-root sweep: the warm parent is a subreaper, orphans stay below it."""
+    pid = os.fork()
+    if pid == 0:
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
+            if os.fork() == 0:
+                hydra()
+            while True:  # reap adopted orphans, as the warm parent does
+                try:
+                    os.wait()
+                except ChildProcessError:
+                    time.sleep(0.01)
+        finally:
+            os._exit(0)
+    reaped.append(pid)
+    wait_until(lambda: _descendants(pid), "the hydra to start")
+    time.sleep(0.2)
+    assert kill_descendants(pid)
+    time.sleep(0.2)
+    assert _descendants(pid) == set()
+    assert os.waitpid(pid, os.WNOHANG) == (0, 0), "the warm parent itself must survive"
+
+
+def test_slot_lock_folder_is_per_user_except_root() -> None:
+    folder = slot_lock_dir()
+    if os.geteuid() == 0:
+        assert folder == Path("/run/autograder-slots")
+    else:
+        assert folder.name == f"autograder-slots-{os.geteuid()}"

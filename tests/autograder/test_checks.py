@@ -1,0 +1,289 @@
+"""Tests of autograder.checks, the check-authoring module: comparisons (NaN, infinities,
+shapes, kinds, staged messages), named datasets and their points, message text, pictures."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+import autograder.checks as checks
+from autograder.checks import (
+    CheckFailure,
+    Dataset,
+    describe,
+    expect_array,
+    expect_close,
+    expect_equal,
+    expect_int,
+    figure_png,
+    over_datasets,
+    plural,
+    sentence,
+    show_list,
+    show_number,
+    show_point,
+    show_points,
+    side_by_side,
+)
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+INF, NAN = np.inf, np.nan
+
+
+def failure(fn, *args, **kwargs) -> str:
+    with pytest.raises(CheckFailure) as info:
+        fn(*args, **kwargs)
+    return str(info.value)
+
+
+# ---------------------------------------------------------------------------
+# the public surface
+# ---------------------------------------------------------------------------
+
+def test_every_public_name_is_exported_and_documented():
+    for name in checks.__all__:
+        obj = getattr(checks, name)
+        assert obj.__doc__, f"autograder.checks.{name} has no docstring"
+    assert {"Student", "Credit", "Feedback", "CheckFailure", "Dataset", "over_datasets",
+            "show_number", "expect_close", "expect_array", "side_by_side"} <= set(checks.__all__)
+
+
+def test_check_failure_is_in_compare_all():
+    import autograder.compare as compare
+
+    assert "CheckFailure" in compare.__all__
+    assert issubclass(CheckFailure, AssertionError)
+
+
+# ---------------------------------------------------------------------------
+# expect_close: non-finite values
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("got", "expected", "words"), [
+    (5.0, NAN, "5 at index (scalar) where NaN was expected"),
+    (NAN, 5.0, "NaN at index (scalar) where 5 was expected"),
+    (-INF, INF, "-inf at index (scalar) where +inf was expected"),
+    (INF, -INF, "+inf at index (scalar) where -inf was expected"),
+    (1e308, INF, "1e+308 at index (scalar) where +inf was expected"),
+    (INF, 1e308, "+inf at index (scalar) where 1e+308 was expected"),
+    (NAN, INF, "NaN at index (scalar) where +inf was expected"),
+])
+def test_expect_close_refuses_wrong_non_finite_values(got, expected, words):
+    assert words in failure(expect_close, got, expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize(("got", "expected"), [
+    (NAN, NAN), (INF, INF), (-INF, -INF),
+    ([1.0, NAN, -INF, INF], [1.0, NAN, -INF, INF]),
+    (np.array([[NAN, 2.0], [3.0, INF]]), np.array([[NAN, 2.0], [3.0, INF]])),
+])
+def test_expect_close_accepts_matching_non_finite_values(got, expected):
+    expect_close(got, expected, rtol=0, atol=0)
+
+
+def test_expect_close_mixed_array_names_the_first_bad_index_and_the_count():
+    got = np.array([[1.0, NAN, 3.0], [INF, 5.0, 6.0]])
+    want = np.array([[1.0, 2.0, 3.0], [-INF, 5.0, 6.0]])
+    message = failure(expect_close, got, want, rtol=1e-12, atol=0, name="f(x)")
+    assert message.startswith("f(x) has NaN at index [0, 1] where 2 was expected")
+    assert "2 of 6 values" in message
+
+
+def test_expect_close_infinity_does_not_poison_the_finite_comparison():
+    # inf - inf is nan: the finite entries must still be compared, and pass or fail alone
+    expect_close([INF, 1.0], [INF, 1.0 + 1e-13], rtol=1e-12, atol=0)
+    message = failure(expect_close, [INF, 1.1], [INF, 1.0], rtol=1e-12, atol=0)
+    assert "off at index [1]: expected 1, got 1.1" in message
+
+
+def test_expect_close_prints_every_digit_that_matters():
+    message = failure(expect_close, 0.9999999, 1.0, rtol=1e-12, atol=0, name="factor")
+    assert "expected 1, got 0.9999999" in message
+    assert "1 of 1 value(s)" in message
+
+
+def test_expect_close_complex_and_integer_inputs():
+    expect_close(np.array([1 + 2j]), [1 + 2j], rtol=0, atol=0)
+    expect_close([1, 2, 3], np.array([1.0, 2.0, 3.0]), rtol=0, atol=0)
+    assert "off at index [0]" in failure(expect_close, [1 + 2j], [1 + 3j], rtol=1e-9, atol=0)
+
+
+# ---------------------------------------------------------------------------
+# staging: type, then shape, then values
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("got", "words"), [
+    (None, "did you forget `return`?"),
+    ("1.0", "should be an array-like"),
+    ({"a": 1}, "should be an array-like"),
+    ([[1.0, 2.0], [3.0]], "rectangular"),
+    (np.array(["a", "b"]), "should hold"),
+])
+def test_type_comes_before_shape_and_values(got, words):
+    assert words in failure(expect_close, got, [1.0, 2.0], rtol=0, atol=0)
+
+
+def test_shape_comes_before_values():
+    message = failure(expect_close, [NAN, NAN, NAN], [1.0, 2.0], rtol=0, atol=0, name="y")
+    assert message == "y should have shape (2); got shape (3,)."
+
+
+@pytest.mark.parametrize(("shape", "got", "ok"), [
+    ((None, 2), np.zeros((5, 2)), True),
+    ((None, 2), np.zeros((5, 3)), False),
+    ((3,), np.zeros(3), True),
+    ((3,), np.zeros((3, 1)), False),
+    ((), np.float64(1.0), True),
+])
+def test_expect_array_shapes(shape, got, ok):
+    if ok:
+        assert expect_array(got, shape=shape).shape == np.shape(got)
+    else:
+        assert "should have shape" in failure(expect_array, got, shape=shape)
+
+
+@pytest.mark.parametrize(("kind", "got", "ok"), [
+    ("iu", np.array([1, 2], dtype=np.int32), True),
+    ("iu", np.array([1, 2], dtype=np.uint8), True),
+    ("iu", np.array([1.0, 2.0]), False),
+    ("f", np.array([1.0]), True),
+    ("f", np.array([True]), False),
+    ("b", np.array([True, False]), True),
+    ("c", np.array([1j]), True),
+    ("if", np.array([1j]), False),
+])
+def test_expect_array_dtype_kinds(kind, got, ok):
+    if ok:
+        expect_array(got, dtype_kind=kind)
+    else:
+        message = failure(expect_array, got, dtype_kind=kind, name="idx")
+        assert message.startswith("idx should hold ")
+
+
+def test_expect_int_and_equal():
+    assert expect_int(np.int64(3)) == 3 and expect_int(np.array(4)) == 4 and expect_int(5.0) == 5
+    assert "should be an integer" in failure(expect_int, True)
+    assert "should be an integer; got 2.5" in failure(expect_int, 2.5)
+    expect_equal(np.array([1, 2]), np.array([1, 2]))
+    assert "differs at index [1]" in failure(expect_equal, np.array([1, 3]), np.array([1, 2]))
+    assert "expected True" in failure(expect_equal, 1, True)
+
+
+def test_describe_is_short_and_safe():
+    assert describe(None).startswith("None")
+    assert describe(np.zeros((3, 2))) == "an array of shape (3, 2) and dtype float64"
+    assert len(describe("x" * 1000)) < 100
+
+
+# ---------------------------------------------------------------------------
+# datasets and their points
+# ---------------------------------------------------------------------------
+
+def test_dataset_requires_a_reason_for_its_tolerance():
+    with pytest.raises(ValueError, match="needs a `reason`"):
+        Dataset(lambda rng: 1, tolerance=1e-9)
+    with pytest.raises(ValueError, match="`points`"):
+        Dataset(lambda rng: 1, points=-1)
+    with pytest.raises(TypeError, match="`build`"):
+        Dataset([1, 2, 3])  # type: ignore[arg-type]
+    data = Dataset(lambda rng: rng.uniform(size=3), points=2, tolerance=1e-9,
+                   reason="three numbers: rounding only")
+    assert data.build(np.random.default_rng(0)).shape == (3,)
+    with pytest.raises(AttributeError):
+        data.points = 3  # type: ignore[misc]  # frozen
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnknownMarkWarning")
+def test_over_datasets_parametrises_with_ids_and_points():
+    datasets = {"small": Dataset(lambda rng: 1), "unseen-big": Dataset(lambda rng: 2, points=3)}
+    mark = over_datasets(datasets)
+    argname, params = mark.args
+    assert argname == "name"
+    assert [p.id for p in params] == ["small", "unseen-big"]
+    assert [p.values for p in params] == [("small",), ("unseen-big",)]
+    assert [p.marks[0].args for p in params] == [(1.0,), (3.0,)]
+    assert [p.marks[0].name for p in params] == ["points", "points"]
+    override = over_datasets(datasets, "case", points=lambda d: d.points * 2)
+    assert override.args[0] == "case" and override.args[1][1].marks[0].args == (6.0,)
+    with pytest.raises(ValueError):
+        over_datasets({})
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnknownMarkWarning")
+def test_over_datasets_decorates_a_check():
+    @over_datasets({"a": Dataset(lambda rng: 1, points=2)}, "case")
+    def check(case):
+        return case
+
+    (mark,) = check.pytestmark
+    assert mark.name == "parametrize" and mark.args[0] == "case"
+    assert mark.args[1][0].marks[0].args == (2.0,)
+
+
+# ---------------------------------------------------------------------------
+# text
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("value", "text"), [
+    (0.9999999, "0.9999999"), (1.0, "1"), (-3.0, "-3"), (0.1, "0.1"), (1e-300, "1e-300"),
+    (2.0**60, "1.152921504606847e+18"), (np.float32(0.5), "0.5"), (np.int64(7), "7"),
+    (NAN, "nan"), (INF, "inf"), (-INF, "-inf"), (True, "1"),
+])
+def test_show_number_never_hides_a_difference(value, text):
+    assert show_number(value) == text
+
+
+def test_show_number_with_digits_never_rounds_to_an_integer_it_is_not():
+    assert show_number(0.9999999, digits=4) == "0.9999999"
+    assert show_number(2.00000001, digits=3) == "2.00000001"
+    assert show_number(3.14159265, digits=3) == "3.14"
+    assert show_number(5.0, digits=3) == "5"
+
+
+def test_points_lists_and_sentences():
+    assert show_point((0.1, 2.0)) == "(0.1, 2)"
+    assert show_point(np.array([1.5, -2.25, 3.0])) == "(1.5, -2.25, 3)"
+    assert show_list(range(10), limit=3) == "[0, 1, 2, ... (7 more)]"
+    assert show_list([0.5, 1.0]) == "[0.5, 1]"
+    assert plural(1, "point") == "1 point" and plural(2.5, "point") == "2.5 points"
+    assert show_points(1.5, 2) == "1.5 of 2 points"
+    assert sentence("the hull is wrong") == "The hull is wrong."
+    assert sentence("convex_hull(points) returned 3.") == "convex_hull(points) returned 3."
+    assert sentence("") == ""
+
+
+# ---------------------------------------------------------------------------
+# pictures
+# ---------------------------------------------------------------------------
+
+def _png() -> bytes:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(2, 2))
+    FigureCanvasAgg(fig)
+    fig.add_subplot().plot([0, 1], [1, 0])
+    return checks.render_png(fig, dpi=30)
+
+
+def test_figure_png_reads_figure_data():
+    png = _png()
+    assert png.startswith(PNG_SIGNATURE)
+    assert figure_png({"axes": [], "png": png}) == png
+    assert figure_png({"axes": [], "png": np.frombuffer(png, dtype=np.uint8)}) == png
+    assert figure_png({"axes": [], "png": b"GIF89a"}) is None
+    assert figure_png(None) is None and figure_png({"axes": []}) is None
+
+
+@pytest.mark.parametrize("student", [None, b"junk", "figure"])
+def test_side_by_side_draws_the_given_reference(student):
+    import matplotlib.image as mpimg
+
+    drawn = []
+    value = {"axes": [], "png": _png()} if student == "figure" else student
+    png = side_by_side(value, lambda ax: drawn.append(ax.plot([0, 1], [0, 1])),
+                       right_title="the reference car")
+    assert png.startswith(PNG_SIGNATURE) and len(drawn) == 1
+    assert mpimg.imread(io.BytesIO(png), format="png").shape[:2] == (320, 800)
