@@ -17,6 +17,7 @@ from autograder.results import SubmissionResult
 
 if TYPE_CHECKING:
     from autograder.shards import MergeReport
+    from autograder.validate import ValidationReport
 
 
 def resolve_assignment(spec: str | Path | Assignment) -> Assignment:
@@ -106,16 +107,44 @@ def gradescope_run(root: str | Path = exports.GRADESCOPE_ROOT) -> int:
     root = Path(root)
     found = load_assignment(exports.bundled_assignment(root / "source"))
     notebook, note = exports.pick_notebook(root / "submission", found.notebook.name)
+    student = exports.gradescope_student(root) or notebook.stem
     out = root / "results"
     with Grader(found) as grader:
         try:
-            result = grader.grade(notebook, id=notebook.stem, out_dir=out)
+            result = grader.grade(notebook, id=student, out_dir=out)
         except Exception as exc:  # the grader's own failure: Gradescope still gets a result
-            result = error_result(found, notebook, notebook.stem, exc)
+            result = error_result(found, notebook, student, exc)
     if note:
         result = dataclasses.replace(result, output=f"{note} {result.output}")
-    write_result(out, result)
+    exports.write_gradescope_result(out, result)
     return 0
+
+
+def new(name: str, *, out: Path | None = None, title: str | None = None) -> Path:
+    """Write a working assignment folder ``out/name`` (see :mod:`autograder.scaffold`).
+
+    ``out`` defaults to ``./assignments`` when the current folder has one, else
+    the current folder. Returns the new folder.
+    """
+    from autograder.scaffold import new_assignment
+
+    if out is None:
+        out = Path("assignments") if Path("assignments").is_dir() else Path(".")
+    return new_assignment(name, out=Path(out), title=title)
+
+
+def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
+             jobs: int | None = None, options: GradingOptions | None = None) -> "ValidationReport":
+    """Release ``assignment``, check nothing leaked, grade its examples and the
+    released template, and compare each score with its band in
+    ``examples/expected.toml`` (see :mod:`autograder.validate`).
+
+    ``work``, when given, keeps the release and the results (feedback pages) there.
+    """
+    from autograder.validate import validate as _validate
+
+    return _validate(resolve_assignment(assignment), work=None if work is None else Path(work),
+                     jobs=jobs, options=options)
 
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,

@@ -60,7 +60,7 @@ SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
 _ALLOWED = {
     "assignment": ("name", "title", "notebook", "data"),
-    "rules": ("forbid", "reason"),
+    "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
 }
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -83,6 +83,15 @@ class Rules:
 
     forbid: tuple[str, ...] = ()
     reason: str = ""
+    #: forbidden names that allowed libraries need inside (``matplotlib.path`` for
+    #: drawing): student code may not name them, but the worker leaves the aliases
+    #: inside other libraries working
+    internal_use: tuple[str, ...] = ()
+
+    def to_wire(self) -> dict[str, object]:
+        """The plain data the worker's guard takes (see ``autograder.worker.guard``)."""
+        return {"names": list(self.forbid), "internal_use": list(self.internal_use),
+                "reason": self.reason}
 
 
 @dataclass(frozen=True)
@@ -390,7 +399,12 @@ def _rules(toml_path: Path, config: dict[str, Any]) -> Rules:
                                   "name such as 'scipy.spatial' or 'numpy.linalg.solve'.")
     default = (f"This assignment does not allow {', '.join(forbid)}." if forbid else "")
     reason = _get(toml_path, config, "rules", "reason", str, default)
-    return Rules(forbid=forbid, reason=reason)
+    internal = _string_list(toml_path, config, "rules", "internal_use")
+    stray = [name for name in internal if name not in forbid]
+    if stray:
+        raise AssignmentError(f"{toml_path}: [rules] internal_use lists {', '.join(stray)}, "
+                              "which [rules] forbid does not; list only forbidden names there.")
+    return Rules(forbid=forbid, reason=reason, internal_use=internal)
 
 
 def _limits(toml_path: Path, config: dict[str, Any]

@@ -10,6 +10,7 @@ local process pool, or a Dask cluster).
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import sys
 import time
@@ -89,18 +90,28 @@ def collect_submissions(paths: Iterable[Path]) -> list[Path]:
     """Expand folders to the notebooks inside them; keep explicit files as given."""
     found: list[Path] = []
     for path in map(Path, paths):
-        if path.is_dir():
-            found += sorted(p for p in path.rglob("*.ipynb")
-                            if ".ipynb_checkpoints" not in p.parts and p.is_file())
-        elif path.exists():
+        if path.is_dir() and not path.is_symlink():
+            found += _notebooks_below(path)
+        elif path.exists() or path.is_symlink():
             found.append(path)
         else:
             raise UsageError(f"Submission {str(path)!r} does not exist; pass a notebook "
                              "file or a folder of notebooks.")
-    unique = list(dict.fromkeys(p.resolve() for p in found))
+    # Absolute, never resolved: a link stays a link (and is refused with a result
+    # saying why) instead of becoming the file it points to under another id.
+    unique = list(dict.fromkeys(Path(os.path.abspath(p)) for p in found))
     if not unique:
         raise UsageError("No notebooks (*.ipynb) were found in the submissions given.")
     return unique
+
+
+def _notebooks_below(folder: Path) -> list[Path]:
+    """``*.ipynb`` entries under ``folder``, links included, without following linked folders."""
+    found = []
+    for directory, subdirs, files in os.walk(folder, followlinks=False):
+        subdirs[:] = sorted(d for d in subdirs if d != ".ipynb_checkpoints")
+        found += [Path(directory, name) for name in sorted(files) if name.endswith(".ipynb")]
+    return found
 
 
 def _slug(text: str) -> str:

@@ -37,7 +37,7 @@ from typing import Any, Callable
 import numpy as np
 
 from autograder import protocol
-from autograder.errors import UsageError
+from autograder.errors import AutograderError, UsageError
 
 __all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "Traced", "traced", "CallbackRegistry"]
 
@@ -88,6 +88,7 @@ class Traced:
         self.records: list[CallRecord] = []
         self.errors: list[str] = []
         self._points: list[np.ndarray] = []
+        self._kept = 0
         self._recorded = 0
         self.truncated = False
 
@@ -116,7 +117,7 @@ class Traced:
     def reset(self) -> None:
         """Forget every call recorded so far."""
         self.calls, self.records, self.errors = 0, [], []
-        self._points, self._recorded, self.truncated = [], 0, False
+        self._points, self._kept, self._recorded, self.truncated = [], 0, 0, False
 
     # -- recording (called by the registry) ------------------------------------
     def record(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> None:
@@ -135,11 +136,13 @@ class Traced:
         self.truncated = self.truncated or truncated
 
     def _add_points(self, points: np.ndarray) -> None:
-        room = MAX_RECORDED_POINTS - sum(p.size for p in self._points)
+        room = MAX_RECORDED_POINTS - self._kept
         if points.size > room:
             self.truncated = True
         if room > 0:
-            self._points.append(points[:room])
+            kept = points[:room]
+            self._points.append(kept)
+            self._kept += kept.size
         self._recorded += points.size
 
 
@@ -181,10 +184,10 @@ def _plain_leaf(x: object) -> bool:
 class CallbackRegistry:
     """The functions passed in one student call; answers the worker's callback requests."""
 
-    def __init__(self, *, max_callbacks: int = MAX_CALLBACKS,
+    def __init__(self, *, max_callbacks: int | None = None,
                  own_ref: Callable[[object], protocol.CallableRef | None] | None = None) -> None:
         self.functions: dict[str, Traced] = {}
-        self.max_callbacks = max_callbacks
+        self.max_callbacks = MAX_CALLBACKS if max_callbacks is None else max_callbacks
         self.callbacks = 0
         self.exceeded = False
         self.check_error: BaseException | None = None
@@ -267,10 +270,14 @@ class CallbackRegistry:
         except Exception as exc:
             kind = type(exc).__name__
             function.errors.append(f"{kind}: {exc}"[:2000])
+            if kind not in _PASSED_ON or isinstance(exc, AutograderError):
+                # NameError, AttributeError, a misused grader API...: the check's own bug,
+                # reported to the instructor after the call, never blamed on the student
+                self.check_error = self.check_error or exc
+                return _error("RuntimeError", "the grader could not evaluate this function")
             passed = ", ".join(_describe(a) for a in args) or "no arguments"
-            return _error(kind if kind in _PASSED_ON else "ValueError",
-                          f"`{function.name}` raised {kind} when called with {passed}: check "
-                          "what your code passes to it")
+            return _error(kind, f"`{function.name}` raised {kind} when called with {passed}: "
+                          "check what your code passes to it")
         return {"op": "callback-result", "ok": True, "value": value}
 
 

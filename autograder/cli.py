@@ -66,6 +66,22 @@ def build_parser() -> argparse.ArgumentParser:
     gsc.add_argument("assignment", help="a folder name under assignments/ or a path to one")
     gsc.add_argument("--out", type=Path, required=True, help="folder to write <name>-gradescope.zip to")
 
+    new = commands.add_parser("new", help="write a working assignment folder to start from")
+    new.add_argument("name", help="the assignment's name: lower-case letters, digits, underscores")
+    new.add_argument("--out", type=Path, default=None,
+                     help="folder to create it in (default: ./assignments if it exists, else .)")
+    new.add_argument("--title", default=None, help="the notebook's title")
+
+    val = commands.add_parser(
+        "validate", help="release an assignment, check nothing leaked, grade its examples "
+                         "and fail when a score is outside its band in examples/expected.toml")
+    val.add_argument("assignment", help="a folder name under assignments/ or a path to one")
+    val.add_argument("--work", type=Path, default=None,
+                     help="keep the release and the results here (default: a temporary folder)")
+    val.add_argument("--jobs", type=_positive_int, default=None,
+                     help=f"examples graded in parallel (default: number of cores, {os.cpu_count()})")
+    _timing_options(val)
+
     chk = commands.add_parser("check", help="run the public checks on your notebook before submitting")
     chk.add_argument("notebook", type=Path, help="your notebook")
     chk.add_argument("--assignment", default=None,
@@ -166,6 +182,21 @@ def _check(args: argparse.Namespace) -> int:
     return 0 if result.score >= result.max_score else 1
 
 
+def _new(args: argparse.Namespace) -> int:
+    folder = api.new(args.name, out=args.out, title=args.title)
+    print(f"Wrote {folder}: edit {args.name}.ipynb, the checks and the examples, then run "
+          f"`autograder validate {folder}`.")
+    return 0
+
+
+def _validate(args: argparse.Namespace) -> int:
+    from autograder.validate import format_report
+
+    report = api.validate(args.assignment, work=args.work, jobs=args.jobs, options=_options(args))
+    print(format_report(report))
+    return 0 if report.ok else 1
+
+
 def _release(args: argparse.Namespace) -> int:
     path = api.release(args.assignment, out=args.out)
     print(f"Wrote the student version to {path.parent} (notebook: {path.name}).")
@@ -216,8 +247,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     handlers = {"release": _release, "grade": _grade, "check": _check, "gradescope": _gradescope,
+                "new": _new, "validate": _validate,
                 "serve": _serve, "roster": _roster, "submit": _submit}
-    if args.command in ("grade", "check", "serve"):
+    if args.command in ("grade", "check", "serve", "validate"):
         _say_missing_protections()
     try:
         return handlers[args.command](args)

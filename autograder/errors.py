@@ -64,9 +64,12 @@ class MissingFunction(StudentError, AttributeError):
 class StudentException(StudentError):
     """The student's function raised; ``traceback`` holds the student's traceback."""
 
-    def __init__(self, message: str, *, traceback: str = "") -> None:
+    def __init__(self, message: str, *, traceback: str = "", function: str = "",
+                 exc_type: str = "", detail: str = "") -> None:
         super().__init__(message)
         self.traceback = traceback
+        #: what hidden checks may show: the function, the exception's type, its message
+        self.function, self.exc_type, self.detail = function, exc_type, detail
 
 
 class CallTimeout(StudentError, TimeoutError):

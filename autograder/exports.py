@@ -8,13 +8,17 @@ is :func:`autograder.api.gradescope_run`.
 
 from __future__ import annotations
 
+import base64
 import importlib.resources
 import io
+import json
 import re
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+
+import nbformat
 
 import autograder
 from autograder.assignment import Assignment
@@ -176,7 +180,8 @@ _EPOCH = (1980, 1, 1, 0, 0, 0)
 def source_root() -> Path:
     """The checkout this package runs from (``pyproject.toml``, ``autograder/``, ``reference/``)."""
     root = Path(autograder.__file__).resolve().parent.parent
-    missing = [n for n in ("pyproject.toml", "README.md", "autograder", "reference")
+    missing = [n for n in ("pyproject.toml", "README.md", "autograder", "reference",
+                           "reference/pyproject.toml")
                if not (root / n).exists()]
     if missing:
         raise UsageError(f"The Gradescope zip bundles this package's source, but {root} lacks "
@@ -209,8 +214,14 @@ def gradescope_entries(assignment: Assignment) -> list[tuple[str, Path | bytes, 
     entries += [(name, root / name, False) for name in ("pyproject.toml", "README.md")]
     for package in ("autograder", "reference"):
         entries += [(p.relative_to(root).as_posix(), p, False) for p in _files(root / package)]
-    entries += [(f"assignment/{assignment.name}/{p.relative_to(assignment.root).as_posix()}", p, False)
-                for p in _files(assignment.root, skip_top=("examples",))]
+    # The instructor notebook holds the solutions: the zip carries the released one in
+    # its place (the grader needs it only to restore locked cells).
+    from autograder.release import student_template  # imports nbgrader: instructors only
+
+    released = nbformat.writes(student_template(assignment)).encode()
+    for path in _files(assignment.root, skip_top=("examples",)):
+        name = f"assignment/{assignment.name}/{path.relative_to(assignment.root).as_posix()}"
+        entries.append((name, released if path == assignment.notebook else path, False))
     return entries
 
 
@@ -246,6 +257,41 @@ def bundled_assignment(source: Path) -> Path:
     return found[0]
 
 
+def gradescope_student(root: Path) -> str | None:
+    """The submitter's id from Gradescope's ``submission_metadata.json`` (seeds unseen data)."""
+    try:
+        users = json.loads((root / "submission_metadata.json").read_text())["users"]
+        first = users[0]
+        return str(first.get("sid") or first.get("email") or first.get("name")) or None
+    except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError):
+        return None
+
+
+def write_gradescope_result(out: Path, result: SubmissionResult) -> Path:
+    """``out/results.json`` for Gradescope, with each check's pictures inside its output.
+
+    Gradescope shows only ``results.json``, not the files beside it, so a picture
+    attached to a check (the student's car beside the reference) is embedded as a
+    data URI in the test's Markdown output.
+    """
+    data = result.to_dict()
+    for test, entry in zip(result.tests, data["tests"]):
+        pictures = []
+        for attachment in test.attachments:
+            try:  # attachments are named relative to the result's folder
+                png = (out / attachment.filename).read_bytes()
+            except OSError:
+                continue
+            label = clean_text(attachment.label).replace("]", " ")
+            pictures.append(f"![{label}](data:image/png;base64,{base64.b64encode(png).decode()})")
+        if pictures:
+            entry["output"] = (entry["output"] + "\n\n" + "\n\n".join(pictures)).strip()
+            entry["output_format"] = "md"
+    path = out / "results.json"
+    atomic_write_text(path, json.dumps(data, indent=2, ensure_ascii=False))
+    return path
+
+
 def pick_notebook(folder: Path, expected_name: str) -> tuple[Path, str]:
     """The notebook to grade among a Gradescope submission's files, and a note for the student.
 
@@ -253,8 +299,10 @@ def pick_notebook(folder: Path, expected_name: str) -> tuple[Path, str]:
     else the first by name, with a note saying so. With no notebook at all the
     expected path is returned (the grader then reports it missing).
     """
+    # Regular files only: a link could point at any file of the image (the bundled
+    # assignment, another notebook); the grader refuses one if it is picked anyway.
     notebooks = sorted(p for p in folder.rglob("*.ipynb")
-                       if p.is_file() and ".ipynb_checkpoints" not in p.parts)
+                       if p.is_file() and not p.is_symlink() and ".ipynb_checkpoints" not in p.parts)
     named = [p for p in notebooks if p.name == expected_name]
     if named:
         return named[0], ""
@@ -266,6 +314,6 @@ def pick_notebook(folder: Path, expected_name: str) -> tuple[Path, str]:
 
 
 __all__ = ["GRADESCOPE_ROOT", "GRADESCOPE_SCRIPTS", "ROOT_ENV", "append_step_summary",
-           "bundled_assignment", "ci_lines", "gradescope_entries", "gradescope_zip", "junit_xml",
+           "bundled_assignment", "ci_lines", "gradescope_student", "write_gradescope_result", "gradescope_entries", "gradescope_zip", "junit_xml",
            "pick_notebook", "points_line", "source_root", "step_summary_markdown", "write_junit",
            "xml_text"]

@@ -11,6 +11,7 @@ import functools
 import hashlib
 import importlib.util
 import os
+import stat
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -175,6 +176,7 @@ class Grader:
         key = submission_key(raw_sha, self.assignment, self.options)
         seed = submission_seed(self.assignment, sub_id)
         try:
+            _require_regular_file(Path(path))
             notebook: Notebook | None = restore_locked(
                 read_notebook(path, max_bytes=self.options.max_notebook_bytes), self._locked)
             problem = ""
@@ -204,7 +206,8 @@ class Grader:
         session = StudentSession(
             slot=self._slot, cells=cells, data_files=self._data_files(), policy=self.policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
-            cpu_budget=self.options.cpu_budget or notebook_timeout + 20 * call_timeout)
+            cpu_budget=self.options.cpu_budget or notebook_timeout + 20 * call_timeout,
+            forbid=self.assignment.rules.to_wire())
         try:
             run = session.start()
             tests = self._run_checks(session, run.functions, forbidden, seed, out_dir)
@@ -346,6 +349,24 @@ def _result(assignment: str, outcome: Any, output: str, tests: tuple[CheckResult
     return SubmissionResult(id="", source="", assignment=assignment, key="", sha256="",
                             outcome=outcome, output=output, tests=tests, execution_time=0.0,
                             seed=seed)
+
+
+def _require_regular_file(path: Path) -> None:
+    """Refuse links and special files: a submission is the student's own regular file.
+
+    A link could name any file the grader can read (the instructor notebook, a
+    classmate's submission); a FIFO or device could block or never end.
+    """
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError as exc:
+        raise NotebookError(f"The file could not be read ({exc.strerror}).", kind="unreadable") from None
+    if stat.S_ISLNK(mode):
+        raise NotebookError("This submission is a symbolic link, not a notebook file; submit "
+                            "the .ipynb file itself.", kind="not-regular")
+    if not stat.S_ISREG(mode):
+        raise NotebookError("This submission is not a regular file (a folder, pipe or device); "
+                            "submit the .ipynb file itself.", kind="not-regular")
 
 
 def _file_sha256(path: Path) -> str:

@@ -74,7 +74,7 @@ EMPTY_NOTEBOOK_MESSAGE = (
 #: Every ``NotebookError.kind`` this module raises.
 ERROR_KINDS = (
     "unreadable", "too-large", "binary", "encoding", "not-json",
-    "not-notebook", "old-format", "invalid", "language",
+    "not-notebook", "old-format", "invalid", "language", "not-regular",
 )
 
 _RESAVE = "Open it in Jupyter, save it (File > Save), and submit the .ipynb file again."

@@ -202,7 +202,7 @@ class GradingPlugin:
             return "partial", exc.fraction, str(exc)
         for cls, kind in _KINDS:
             if isinstance(exc, cls):
-                return kind, 0.0, _student_message(exc)
+                return kind, 0.0, _student_message(exc, hidden=hidden)
         if isinstance(exc, (CheckFailure, AssertionError)):
             return "wrong", 0.0, str(exc) or "This check failed."
         if isinstance(exc, pytest.skip.Exception):
@@ -215,7 +215,21 @@ class GradingPlugin:
                 ". Make sure it returns exactly the type and shape the assignment asks for.")
 
 
-def _student_message(exc: BaseException) -> str:
+#: characters of the student's own exception message a hidden check may show
+HIDDEN_EXCERPT = 80
+
+
+def _student_message(exc: BaseException, *, hidden: bool) -> str:
+    """The message for a failed call; for hidden checks, no traceback and a short excerpt.
+
+    A student's exception message can repeat its arguments, and the arguments of
+    hidden checks are the hidden data: they never reach the feedback whole.
+    """
+    if isinstance(exc, StudentException) and hidden and exc.exc_type:
+        excerpt = exc.detail[:HIDDEN_EXCERPT] + ("..." if len(exc.detail) > HIDDEN_EXCERPT else "")
+        return (f"{exc.function} raised {exc.exc_type} on this hidden input (your message, "
+                f"first {HIDDEN_EXCERPT} characters: \u00ab{excerpt}\u00bb). Hidden inputs and "
+                "tracebacks are not shown; reproduce it with inputs of your own.")
     message = str(exc)
     if isinstance(exc, StudentException) and exc.traceback:
         message += "\n\n" + exc.traceback

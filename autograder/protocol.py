@@ -196,7 +196,7 @@ SAFE_FUNCTIONS = frozenset(f"numpy.{name}" for name in (
     "sin", "cos", "tan", "arcsin", "arccos", "arctan", "sinh", "cosh", "tanh", "arcsinh",
     "arccosh", "arctanh", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "sqrt",
     "cbrt", "square", "absolute", "abs", "sign", "reciprocal", "floor", "ceil", "rint",
-    "negative", "positive", "sinc", "deg2rad", "rad2deg",
+    "negative", "positive", "deg2rad", "rad2deg",
 ))
 _REF_ID_RE = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
 

@@ -28,7 +28,7 @@ from typing import Any
 import nbformat
 
 from autograder.assignment import Assignment
-from autograder.errors import AssignmentError
+from autograder.errors import AssignmentError, UsageError
 
 __all__ = ["release", "student_template", "PREPROCESSORS", "FORBIDDEN_MARKERS"]
 
@@ -78,8 +78,14 @@ def student_template(assignment: Assignment) -> nbformat.NotebookNode:
         example a solution region outside a solution cell).
     """
     # nbgrader is imported here: it is slow to import and only releasing needs it.
-    from nbgrader import preprocessors
-    from nbgrader.nbgraderformat import ValidationError as MetadataError
+    try:
+        from nbgrader import preprocessors
+        from nbgrader.nbgraderformat import ValidationError as MetadataError
+    except ImportError:
+        raise UsageError(
+            "Releasing an assignment runs nbgrader's preprocessors, and nbgrader is not "
+            "installed: install the instructor's extra, python -m pip install "
+            "\"numgrade[instructor]\" (or -e \".[instructor]\" in a checkout).") from None
 
     nb = _read_instructor(assignment.notebook)
     resources: dict[str, Any] = {}

@@ -10,6 +10,7 @@ waits on student code without a deadline.
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import select
 import shutil
@@ -32,6 +33,7 @@ from autograder.errors import (
     AutograderError,
     CallTimeout,
     EngineError,
+    ForbiddenUse,
     MissingFunction,
     NotRun,
     StudentError,
@@ -169,6 +171,8 @@ def claim_slot(first: int = 0) -> tuple[int, int]:
 
 #: the most characters of captured output the grader keeps from the worker
 OUTPUT_CAP = 1 << 20
+#: the most cell reports kept (each holds at most a 20,000-character traceback)
+MAX_CELL_REPORTS = 200
 
 
 def _cell_report(data: Any) -> CellReport:
@@ -323,13 +327,14 @@ def _live_processes(uid: int) -> list[int]:
     for name in os.listdir("/proc"):
         if not name.isdigit():
             continue
-        try:
-            info = os.stat(f"/proc/{name}")
-            with open(f"/proc/{name}/stat", "rb") as handle:
-                state = handle.read().rsplit(b")", 1)[1].split()[0]
-        except OSError:
+        try:  # not the owner of /proc/<pid>: that is root for a process that changed ids
+            with open(f"/proc/{name}/status", "rb") as handle:
+                fields = dict(line.split(b":", 1) for line in handle.read().splitlines()
+                              if b":" in line)
+            real_uid, state = int(fields[b"Uid"].split()[0]), fields[b"State"].split()[0]
+        except (OSError, KeyError, ValueError, IndexError):
             continue
-        if info.st_uid == uid and state != b"Z":
+        if real_uid == uid and state != b"Z":
             found.append(int(name))
     return found
 
@@ -413,6 +418,9 @@ class StudentSession:
     exclude: Sequence[Path] = ()
     #: CPU seconds the whole submission may use (notebook, restarts and calls)
     cpu_budget: float | None = None
+    #: the assignment's forbidden libraries, enforced in the worker at run time:
+    #: ``{"names": [...], "internal_use": [...], "reason": "..."}``
+    forbid: dict[str, Any] = field(default_factory=dict)
     restarts: int = 0
     skip: dict[int, str] = field(default_factory=dict)
     #: per function: how often a call crashed the worker, and the last such error
@@ -499,7 +507,8 @@ class StudentSession:
                     elif op == "cell":
                         current = int(message["index"])
                     elif op == "ready":
-                        return "ready", None, ([_cell_report(c) for c in message["cells"]],
+                        reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
+                        return "ready", None, (reports,
                                                str(message.get("stdout", ""))[:OUTPUT_CAP],
                                                [str(f)[:200] for f in message.get("functions", [])])
                 except (KeyError, TypeError, ValueError):
@@ -517,9 +526,11 @@ class StudentSession:
             shutil.copyfile(source, target)
         request = {
             "op": "spawn", "workdir": str(self._workdir), "slot": self.slot.slot,
-            "policy": _policy_to_wire(self.policy),
+            "policy": _policy_to_wire(self.policy), "forbid": self.forbid,
             "exclude": [str(p) for p in self.exclude],
-            "cells": [[i, s] for i, s in self.cells if i not in self.skip],
+            # One string, not a list: a notebook of many tiny cells must not reach the
+            # protocol's item limit (the worker parses it with json.loads).
+            "cells_json": json.dumps([[i, s] for i, s in self.cells if i not in self.skip]),
         }
         self._pid, self._sock = self.slot.spawn(request)
         self._clock = CpuClock(self._pid)
@@ -674,14 +685,20 @@ def _answer_error(name: str, answer: dict[str, Any]) -> Exception:
             "name at the top level of a code cell, and run every cell before submitting.")
     if error == "not-callable":
         return MissingFunction(
-            f"`{name}` in your notebook is a {answer.get('type')}, not a function.")
+            f"`{name}` in your notebook is a {str(answer.get('type'))[:100]}, not a function.")
+    if error == "exception" and answer.get("type") == "NotAllowedError":
+        # Raised by the worker's guard when code reached a forbidden library at run time.
+        return ForbiddenUse(f"{name} used a library this assignment does not allow: "
+                            f"{str(answer.get('message', ''))[:500]}")
     if error == "exception":
-        return StudentException(
-            f"{name} raised {answer.get('type')}: {answer.get('message', '')}",
-            traceback=str(answer.get("traceback", "")))
+        exc_type = str(answer.get("type", ""))[:100]
+        detail = str(answer.get("message", ""))[:2000]
+        return StudentException(f"{name} raised {exc_type}: {detail}",
+                                traceback=str(answer.get("traceback", ""))[:20_000],
+                                function=name, exc_type=exc_type, detail=detail)
     if error == "unsupported":
         return UnsupportedValue(
-            f"{name} returned a value the grader cannot read ({answer.get('message')}).")
+            f"{name} returned a value the grader cannot read ({str(answer.get('message'))[:300]}).")
     return WorkerCrashed(f"{name}: the worker answered {error!r}.")
 
 

@@ -1,4 +1,4 @@
-"""Benchmark cases: ``reference.geometry`` and ``reference.delaunay`` against SciPy.
+"""Benchmark cases: ``reference.convex_hull`` and ``reference.delaunay`` against SciPy.
 
 - convex hull (monotone chain) of 1e5 uniform random points in the unit
   square, against ``scipy.spatial.ConvexHull(points).vertices`` (Qhull).
@@ -17,8 +17,8 @@ from typing import Callable
 import numpy as np
 import scipy.spatial as ss
 
-from reference.delaunay import delaunay
-from reference.geometry import convex_hull
+from reference import delaunay
+from reference import convex_hull
 
 N_HULL = 100_000
 N_DELAUNAY = 10_000

@@ -1,4 +1,4 @@
-"""Benchmark cases: ``reference.interpolation`` and ``reference.bezier`` against SciPy.
+"""Benchmark cases: ``reference.barycentric_interpolate`` and ``reference.bezier`` against SciPy.
 
 - barycentric interpolation, 100 Chebyshev points, 1e6 evaluation points, against
   :func:`scipy.interpolate.barycentric_interpolate`; both compute their weights
@@ -21,8 +21,8 @@ from typing import Callable
 import numpy as np
 import scipy.interpolate as si
 
-from reference.bezier import bezier
-from reference.interpolation import barycentric_interpolate, chebyshev_nodes
+from reference import bezier
+from reference import barycentric_interpolate, chebyshev_nodes
 
 N_NODES = 100
 N_EVAL = 1_000_000

@@ -1,4 +1,4 @@
-"""Benchmark cases: ``reference.splines.CubicSpline`` against SciPy's.
+"""Benchmark cases: ``reference.CubicSpline`` against SciPy's.
 
 Each case builds a spline on 1e3 knots and evaluates it at 1e6 points; the
 target is to be within a factor 2 of :class:`scipy.interpolate.CubicSpline`.
@@ -12,7 +12,7 @@ from typing import Callable
 import numpy as np
 import scipy.interpolate as si
 
-from reference.splines import CubicSpline
+from reference import CubicSpline
 
 N_KNOTS = 1_000
 N_EVAL = 1_000_000

@@ -25,7 +25,30 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__: list[str] = []
+__all__ = [
+    "CCW_ERRBOUND",
+    "ICC_ERRBOUND",
+    "ORIENT_LO",
+    "ORIENT_HI",
+    "INCIRCLE_LO",
+    "INCIRCLE_HI",
+    "is_exact_objects",
+    "to_objects",
+    "sign",
+    "orient_exact",
+    "orient_num",
+    "orient_xy",
+    "orient_xy_tame",
+    "is_tame",
+    "orient_many",
+    "incircle_num",
+    "incircle_exact",
+    "incircle_filter",
+    "incircle_xy",
+    "incircle_xy_tame",
+    "incircle_many_ccw",
+    "sorted_unique",
+]
 
 Number = Any  # float, int or Fraction
 

@@ -17,10 +17,12 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import solve_banded
 
 from reference._validation import (
+    as_abscissae,
     as_finite_array,
     as_nonnegative_int,
     as_points,
     check_choice,
+    shift_parameter,
 )
 
 __all__ = ["CubicSpline", "ParametricSpline", "parametric_spline"]
@@ -41,12 +43,16 @@ _PERIODIC_TOL = 1e-15
 # ---------------------------------------------------------------------------
 
 
-def _prepare_xy(x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Return clean ``x`` (n,) and ``y`` (n,) or (n, d); raise ``ValueError`` otherwise."""
-    for name, value in (("x", x), ("y", y)):
-        if np.iscomplexobj(value):
-            raise ValueError(f"`{name}` must contain real values; got complex values.")
-    x = as_finite_array(x, "x", ndim=1)
+def _prepare_xy(
+    x: ArrayLike, y: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """Return clean ``x - origin`` (n,), ``y`` (n,) or (n, d) and the integer ``origin``.
+
+    ``origin`` is 0 unless ``x`` holds integers beyond ``2**53`` (see
+    :func:`reference._validation.as_abscissae`); raises ``ValueError`` or
+    ``TypeError`` for invalid input.
+    """
+    x, origin = as_abscissae(x, "x", ndim=1)
     y = as_finite_array(y, "y")
     n = x.shape[0]
     if n < 2:
@@ -59,13 +65,20 @@ def _prepare_xy(x: ArrayLike, y: ArrayLike) -> tuple[NDArray[np.float64], NDArra
             f"and len(x) = {n}."
         )
     bad = np.flatnonzero(np.diff(x) <= 0)
+    if bad.size and origin:
+        i = int(bad[0]) + 1
+        raise ValueError(
+            f"`x` must be strictly increasing in double precision; x[{i - 1}] and x[{i}] "
+            "are integers that cannot be told apart as doubles relative to x[0] "
+            "(the knots span too wide a range). Rescale the knots."
+        )
     if bad.size:
         i = int(bad[0]) + 1
         raise ValueError(
             f"`x` must be strictly increasing; x[{i}] = {float(x[i])!r} is not greater "
             f"than x[{i - 1}] = {float(x[i - 1])!r}."
         )
-    return x.copy(), y.copy()
+    return x.copy(), y.copy(), origin
 
 
 def _end_condition(bc: Any, which: int, value_shape: tuple[int, ...]) -> Any:
@@ -323,7 +336,10 @@ class CubicSpline:
     Attributes
     ----------
     x : ndarray, shape (n,)
-        The knots.
+        The knots, as doubles. Integer knots beyond ``2**53`` (which doubles
+        would round, and could merge) are used exactly: the spline is built
+        on ``x - x[0]`` computed in integers, and evaluation points are
+        shifted the same way.
     c : ndarray, shape (4, n-1) or (4, n-1, d)
         ``c[k, i]`` multiplies ``(t - x[i])**(3 - k)`` on ``[x[i], x[i+1]]``,
         exactly as ``scipy.interpolate.CubicSpline.c``.
@@ -411,13 +427,15 @@ class CubicSpline:
     """
 
     def __init__(self, x: ArrayLike, y: ArrayLike, bc_type: Any = "natural") -> None:
-        x, y = _prepare_xy(x, y)
+        original = as_finite_array(x, "x")  # validated again below; rounded copy
+        x, y, origin = _prepare_xy(x, y)
         bc = _prepare_bc(bc_type, y)
         if bc == "periodic":
             s = _slopes_periodic(x, y)
         else:
             s = _slopes_clamped_or_free(x, y, bc)
-        self.x: NDArray[np.float64] = x
+        self.x: NDArray[np.float64] = x if origin == 0 else original
+        self._x, self._origin = x, origin
         self.c: NDArray[np.float64] = _hermite_coefficients(x, y, s)
         self.bc_type = bc_type
         self._periodic = bc == "periodic"
@@ -463,17 +481,17 @@ class CubicSpline:
         >>> s(0.5).shape, s([0.5, 1.5]).shape
         ((2,), (2, 2))
         """
-        t_arr = as_finite_array(t, "t")
+        t_arr = shift_parameter(t, "t", self._origin)
         nu = as_nonnegative_int(nu, "nu")
         tail = self.c.shape[2:]
         flat = t_arr.ravel()
         if nu > 3:
             return np.zeros(t_arr.shape + tail)[()]
         if self._periodic:
-            x0, period = self.x[0], self.x[-1] - self.x[0]
+            x0, period = self._x[0], self._x[-1] - self._x[0]
             flat = x0 + np.mod(flat - x0, period)
         idx = _interval_index(self._breaks, flat)
-        out = _evaluate(self.x, _derivative_coefficients(self.c, nu), idx, flat)
+        out = _evaluate(self._x, _derivative_coefficients(self.c, nu), idx, flat)
         return out.reshape(t_arr.shape + tail)[()]
 
 

@@ -40,6 +40,8 @@ __all__ = [
     "as_nonnegative_int",
     "as_parameter",
     "check_choice",
+    "as_abscissae",
+    "shift_parameter",
 ]
 
 #: Integers of at most this magnitude are exactly representable as doubles.
@@ -297,3 +299,48 @@ def check_choice(value: Any, name: str, choices: tuple[str, ...]) -> str:
         options = ", ".join(repr(c) for c in choices)
         raise ValueError(f"`{name}` must be one of {options}; got {value!r}.")
     return value
+
+
+def as_abscissae(
+    value: ArrayLike, name: str, *, ndim: int | None = 1
+) -> tuple[NDArray[np.float64], int]:
+    """Return ``(values - origin, origin)``: abscissae as doubles, shifted when needed.
+
+    Doubles, and integers up to ``2**53``, are returned as they are with
+    ``origin = 0``. Larger integers (int64 near ``2**62``, Python ints) would
+    round, and distinct ones could become equal; they are shifted by the
+    integer ``origin = min(values)`` first, exactly, so that nearby integers
+    stay distinct (``[2**62, 2**62 + 1]`` becomes ``[0.0, 1.0]``). Callers
+    that evaluate at points ``t`` shift them with :func:`shift_parameter`.
+    Interpolation is translation invariant, so the results do not change.
+    """
+    exact = as_exact_array(value, name, ndim=ndim)
+    if exact.dtype != object or exact.size == 0:
+        return exact, 0
+    origin = min(exact.reshape(-1).tolist())
+    origin = int(origin) if not isinstance(origin, Fraction) else int(math.floor(origin))
+    shifted = np.array([float(v - origin) for v in exact.reshape(-1).tolist()])
+    return shifted.reshape(exact.shape), origin
+
+
+def shift_parameter(value: ArrayLike, name: str, origin: int) -> NDArray[np.float64]:
+    """``value - origin`` as finite doubles, for the ``origin`` of :func:`as_abscissae`.
+
+    With ``origin == 0`` this is :func:`as_finite_array`. Otherwise integers
+    are shifted exactly and doubles with an error-free transformation
+    (Knuth's TwoSum), so the result is within one rounding of the exact
+    difference.
+    """
+    if origin == 0:
+        return as_finite_array(value, name)
+    exact = as_exact_array(value, name)
+    if exact.dtype == object:
+        flat = [float(v - origin) for v in exact.reshape(-1).tolist()]
+        return np.array(flat, dtype=np.float64).reshape(exact.shape)
+    hi = float(origin)
+    lo = float(origin - int(hi))
+    s = exact - hi
+    # TwoSum of exact and -hi: err is the rounding error of s, exactly.
+    bb = s - exact
+    err = (exact - (s - bb)) + (-hi - bb)
+    return s + (err - lo)

@@ -82,16 +82,20 @@ def _die_with_parent() -> None:
 
 
 def grade_job(graders: _Graders, storage: Storage, submission: Submission,
-              job: queue.Claimed) -> tuple[SubmissionResult, str]:
+              job: queue.Claimed, *, max_tries: int) -> tuple[SubmissionResult, str]:
     """Grade one job into its own result folder; an engine failure becomes an "error" result."""
     out = storage.result_dir(job.job_id, job.claim)
     notebook = storage.upload_path(submission.sha256)
     title = submission.assignment
     try:
+        if job.tries > max_tries:  # the grading process died this many times on it
+            raise RuntimeError(f"grading stopped the grading process {job.tries - 1} times")
         grader = graders.get(submission.assignment)
         title = grader.assignment.title
         result = grader.grade(notebook, id=submission.user_id, out_dir=out)
-    except Exception as exc:  # the engine's failure: retried, shown to the instructor
+    except (Exception, KeyboardInterrupt) as exc:  # the engine's failure: retried, shown to
+        # the instructor. SIGINT is ignored in grading processes, so a KeyboardInterrupt
+        # here comes from the engine itself, never from a person.
         result = _error(submission, notebook, exc)
         write_result(out, result)
     write_feedback(out, result, title=title)
@@ -119,6 +123,7 @@ def _keep_lease(factory: Any, job: queue.Claimed, settings: WorkerSettings,
 def worker_main(settings: WorkerSettings, stop: Any, name: str) -> None:
     """The loop of one grading process: claim, grade, record, until ``stop`` is set."""
     _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the service; it stops us
     parent = os.getppid()
     course = load_course(settings.course_path)
     engine = make_engine(settings.database_url)
@@ -140,7 +145,8 @@ def worker_main(settings: WorkerSettings, stop: Any, name: str) -> None:
                                       daemon=True)
             keeper.start()
             try:
-                result, folder = grade_job(graders, storage, submission, job)
+                result, folder = grade_job(graders, storage, submission, job,
+                                           max_tries=course.max_tries)
             finally:
                 halt.set()
                 keeper.join()

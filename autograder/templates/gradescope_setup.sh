@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Gradescope runs this once, as root, from /autograder/source, while it builds the
 # autograder image (Ubuntu with Python 3). It installs the grading package bundled
-# beside this file (pyproject.toml, autograder/, reference/) and its dependencies
+# beside this file (pyproject.toml and autograder/, then reference/) and its dependencies
 # into a virtual environment, $AUTOGRADER_ROOT/venv (default /autograder/venv),
 # with a Python of at least 3.11 (installed from Ubuntu, or the deadsnakes PPA on
 # older releases, when the image's python3 is older).
@@ -36,5 +36,7 @@ fi
 
 "$PYTHON" -m venv "$ROOT/venv"
 "$ROOT/venv/bin/python" -m pip install --upgrade pip
-"$ROOT/venv/bin/python" -m pip install "$SOURCE"
+# The grading engine, then the model solutions the hidden checks compare with (their
+# own distribution, so that a student's install of the engine never holds them).
+"$ROOT/venv/bin/python" -m pip install "$SOURCE" "$SOURCE/reference"
 "$ROOT/venv/bin/python" -c 'import autograder, reference; print("installed autograder", autograder.__version__)'

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import json
 import os
 import signal
 import socket
@@ -40,7 +41,7 @@ import matplotlib.pyplot  # noqa: E402,F401
 import matplotlib.tri  # noqa: E402,F401
 
 from autograder import protocol, sandbox  # noqa: E402
-from autograder.worker import execute, figures, serve  # noqa: E402
+from autograder.worker import execute, figures, guard, serve  # noqa: E402
 
 _PR_SET_PDEATHSIG = 1
 _PR_SET_CHILD_SUBREAPER = 36
@@ -101,10 +102,12 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         if gap is not None:
             protocol.send_message(sock, {"op": "sandbox-broken", "path": gap[0], "error": gap[1]})
             return
+        if _forbid_key(request) != _APPLIED[0]:  # the warm parent applied another list
+            notes = (*notes, *_apply_forbid(request))
         output = execute.capture_output(policy.limits.output_bytes)
         protocol.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
-        run.run([(int(i), str(s)) for i, s in request["cells"]],
+        run.run([(int(i), str(s)) for i, s in json.loads(request["cells_json"])],
                 lambda i: _announce(sock, i))
         protocol.send_message(sock, {
             "op": "ready",
@@ -117,6 +120,21 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         code = 70
     finally:
         os._exit(code)
+
+
+#: the forbid list the warm parent applied to itself (inherited by every child)
+_APPLIED: list[str | None] = [None]
+
+
+def _forbid_key(request: dict[str, Any]) -> str:
+    return json.dumps(request.get("forbid") or {}, sort_keys=True)
+
+
+def _apply_forbid(request: dict[str, Any]) -> list[str]:
+    rules = request.get("forbid") or {}
+    return guard.forbid([str(n) for n in rules.get("names", [])],
+                        internal_use=[str(n) for n in rules.get("internal_use", [])],
+                        reason=str(rules.get("reason", "")))
 
 
 def _unreadable_path() -> tuple[str, str] | None:
@@ -172,6 +190,11 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     if not isinstance(request, dict) or request.get("op") != "spawn" or len(fds) != 1:
         return False
     sub = socket.socket(fileno=fds[0])
+    if _APPLIED[0] is None:
+        # Once per warm parent (a slot serves one assignment): unloading the forbidden
+        # libraries costs ~0.1 s, which no child should pay again.
+        _apply_forbid(request)
+        _APPLIED[0] = _forbid_key(request)
     # Computed here, once, so every forked child inherits the cached list.
     sandbox.readable_paths([Path(p) for p in request.get("exclude", [])],
                            extra=[Path(p) for p in request.get("policy", {}).get("allowed_read", [])])

@@ -840,3 +840,76 @@ def test_protocol_imports_only_stdlib_numpy_and_errors():
     assert "pickle" not in imported and "matplotlib" not in imported
     stdlib = sys.stdlib_module_names
     assert {m for m in imported if m not in stdlib} <= {"numpy", "autograder", "__future__"}
+
+
+# --------------------------------------------------------------------------
+# function references ("fn" tag)
+
+
+def test_callable_ref_round_trips_as_plain_data():
+    ref = protocol.CallableRef("g1", "f", "numpy.sin")
+    tree, buffers = encode([ref, {"k": protocol.CallableRef("7.2")}])
+    assert tree[0] == {"$t": "fn", "id": "g1", "name": "f", "safe": "numpy.sin"}
+    assert tree[1]["k"] == {"$t": "fn", "id": "7.2", "name": "f"}
+    got = decode(tree, buffers)
+    assert got == [ref, {"k": protocol.CallableRef("7.2", "f", "")}]
+    assert type(got[0]) is protocol.CallableRef
+
+
+def test_callables_stay_unsupported_without_a_callable_encoder():
+    (node, _) = encode(lambda x: x)
+    assert node["$t"] == "unsupported"
+
+
+def test_callable_encoder_turns_callables_into_refs_and_never_pickles():
+    seen = []
+
+    def export(value):
+        seen.append(value)
+        return protocol.CallableRef(f"9.{len(seen)}", "function")
+
+    def student_function(x):
+        return x
+
+    class Interpolant:
+        def __call__(self, x):
+            return x
+
+    tree, _ = encode({"f": student_function, "g": [Interpolant(), np.sin]},
+                     callable_encoder=export)
+    assert tree == {"f": {"$t": "fn", "id": "9.1", "name": "function"},
+                    "g": [{"$t": "fn", "id": "9.2", "name": "function"},
+                          {"$t": "fn", "id": "9.3", "name": "function"}]}
+    assert seen[0] is student_function
+    refused, _ = encode(student_function, callable_encoder=lambda v: None)
+    assert refused["$t"] == "unsupported"
+
+
+@pytest.mark.parametrize("node", [
+    {"$t": "fn", "id": "", "name": "f"},
+    {"$t": "fn", "id": "a b", "name": "f"},
+    {"$t": "fn", "id": 3, "name": "f"},
+    {"$t": "fn", "id": "x" * 65, "name": "f"},
+    {"$t": "fn", "id": "g1", "name": 1},
+    {"$t": "fn", "id": "g1", "name": "f", "safe": "os.system"},
+    {"$t": "fn", "id": "g1", "name": "f", "code": "print(1)"},
+    {"$t": "fn", "id": "g1"},
+])
+def test_forged_function_refs_are_rejected(node):
+    with pytest.raises(ProtocolError):
+        decode(node)
+
+
+def test_replace_refs_walks_decoded_containers_only():
+    ref = protocol.CallableRef("g1")
+    value = {"a": [1, (ref, 2.0)], "b": np.zeros(2)}
+    out = protocol.replace_refs(value, lambda r: f"stub-{r.id}")
+    assert out["a"] == [1, ("stub-g1", 2.0)] and out["b"] is value["b"]
+    plain = [1, [2, 3], {"x": 4}]
+    assert protocol.replace_refs(plain, lambda r: None) is plain
+
+
+def test_safe_functions_are_numpy_ufuncs():
+    for name in protocol.SAFE_FUNCTIONS:
+        module, attr = name.split(".")
+        assert module == "numpy" and isinstance(getattr(np, attr), np.ufunc), name

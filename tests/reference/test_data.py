@@ -1,4 +1,4 @@
-"""Tests of reference.data: the car strokes and their .npz file."""
+"""Tests of reference.car and its .npz file: the car strokes."""
 
 from __future__ import annotations
 

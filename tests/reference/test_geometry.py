@@ -1,4 +1,4 @@
-"""Tests of :mod:`reference.geometry`: exact orientation and convex hulls.
+"""Tests of :func:`reference.orient2d` and :func:`reference.convex_hull`: exact orientation and convex hulls.
 
 Oracles: exact determinants with :class:`fractions.Fraction`, a plain
 monotone chain over ``Fraction`` coordinates (no filter, no prefilter), and

@@ -1,4 +1,4 @@
-"""Tests of :mod:`reference.interpolation` against SciPy, exact arithmetic and theory."""
+"""Tests of the interpolation part of :mod:`reference` against SciPy, exact arithmetic and theory."""
 
 from __future__ import annotations
 

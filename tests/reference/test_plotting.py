@@ -1,4 +1,4 @@
-"""Tests of reference.plotting: each figure draws onto the given axes only."""
+"""Tests of the figures of reference: each figure draws onto the given axes only."""
 
 from __future__ import annotations
 

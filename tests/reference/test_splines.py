@@ -1,4 +1,4 @@
-"""Tests of reference.splines against SciPy and against the mathematics."""
+"""Tests of reference.CubicSpline and reference.parametric_spline against SciPy and against the mathematics."""
 
 from __future__ import annotations
 

@@ -29,8 +29,8 @@ import numpy as np
 import pytest
 from scipy.interpolate import BPoly
 
-from reference.bezier import bezier as reference_bezier
-from reference.bezier import split as reference_split
+from reference import bezier as reference_bezier
+from reference import split as reference_split
 
 
 import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run
@@ -277,7 +277,7 @@ def oracle_split(ctrl: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
     for poly, where in ((left, t * s), (right, t + (1.0 - t) * s)):
         if np.max(np.abs(fb.curve_points(poly, s) - fb.curve_points(ctrl, where))) \
                 > ORACLE_TOL * fb.size(ctrl):
-            raise RuntimeError("reference.bezier.split does not reproduce the curve: "
+            raise RuntimeError("reference.split does not reproduce the curve: "
                                "fix the oracle.")
     return left, right
 

@@ -11,7 +11,7 @@ triangulation is unique: the answer is compared, as a set of triangles, with
 triangulations are valid, so the answer is judged by its properties, all
 tested exactly: counter-clockwise non-degenerate triangles, 2n - 2 - h of
 them, covering the convex hull, every interior edge locally Delaunay (which
-makes every circumcircle empty), and ``reference.delaunay.is_delaunay`` as the
+makes every circumcircle empty), and ``reference.is_delaunay`` as the
 final word. Sets named ``random-*`` and ``unseen-*`` are drawn from the ``rng``
 fixture: a regrade draws the same points, another submission draws others.
 
@@ -35,8 +35,7 @@ import pytest
 from scipy.spatial import Delaunay
 
 from autograder.compare import CheckFailure
-from reference.delaunay import _incircle_many, delaunay, incircle, is_delaunay
-from reference.geometry import _orient2d_many
+from reference import delaunay, incircle, incircle_many, is_delaunay, orient2d_many
 
 
 import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
@@ -72,7 +71,7 @@ def _float_inside(a, b, c, d) -> bool:
 
 
 def _ccw(a, b, c) -> tuple:
-    return (a, b, c) if _orient2d_many(a, b, c)[0] > 0 else (a, c, b)
+    return (a, b, c) if orient2d_many(a, b, c)[0] > 0 else (a, c, b)
 
 
 def _integer_cases(rng):
@@ -81,7 +80,7 @@ def _integer_cases(rng):
     cases = []
     while len(cases) < 8:
         a, b, c, d = (tuple(int(v) for v in g.integers(-6, 7, 2)) for _ in range(4))
-        if _orient2d_many(a, b, c)[0] != 0 and d not in (a, b, c):
+        if orient2d_many(a, b, c)[0] != 0 and d not in (a, b, c):
             cases.append((*_ccw(a, b, c), d))
     ring = _integer_circle(5)
     for i, j, k, m in [(0, 3, 6, 9), (1, 2, 7, 11), (4, 5, 10, 0)]:
@@ -146,7 +145,7 @@ def _unseen_near_cocircular(rng, count=8):
         ring = centre + radius * np.c_[np.cos(angles), np.sin(angles)]
         k = int(rng.integers(4))
         a, b, c = (tuple(float(v) for v in ring[i]) for i in range(4) if i != k)
-        if _orient2d_many(a, b, c)[0] <= 0:
+        if orient2d_many(a, b, c)[0] <= 0:
             continue
         d = ring[k].copy()
         j = int(rng.integers(2))
@@ -282,7 +281,7 @@ def oracle(points: np.ndarray, *, general: bool) -> np.ndarray:
     if general:
         pairs = _interior_pairs(expected)
         p = points
-        signs = _incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]])
+        signs = incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]])
         if np.any(signs == 0) or _sorted_set(expected) != _sorted_set(Delaunay(points).simplices):
             raise RuntimeError("reference.delaunay and scipy.spatial.Delaunay disagree, or the "
                                "set has cocircular points: fix the dataset or its flag.")
@@ -323,7 +322,7 @@ def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool):
     def judge(tri: np.ndarray) -> tuple[float, list[str]]:
         fb.check_indices(tri, n)
         p = points
-        turn = _orient2d_many(p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]])
+        turn = orient2d_many(p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]])
         flat = np.flatnonzero(turn == 0)
         if flat.size:
             k = int(flat[0])
@@ -364,7 +363,7 @@ def _check_coverage(points, tri, fixed, expected, hull) -> None:
     unused = sorted(set(range(n)) - set(fixed.ravel().tolist()))
     beyond = None
     for u, v in fb.boundary_edges(fixed):
-        out = np.flatnonzero(_orient2d_many(points[u], points[v], points) < 0)
+        out = np.flatnonzero(orient2d_many(points[u], points[v], points) < 0)
         if out.size:
             beyond = (u, v, int(out[0]))
             break
@@ -415,8 +414,8 @@ def _vertex_inside(points: np.ndarray, fixed: np.ndarray, limit: int = 5000):
             continue
         a, b, c = corners[k]
         q = points[near]
-        strictly = ((_orient2d_many(a, b, q) > 0) & (_orient2d_many(b, c, q) > 0)
-                    & (_orient2d_many(c, a, q) > 0))
+        strictly = ((orient2d_many(a, b, q) > 0) & (orient2d_many(b, c, q) > 0)
+                    & (orient2d_many(c, a, q) > 0))
         if strictly.any():
             return int(near[np.argmax(strictly)]), k
     return None
@@ -428,7 +427,7 @@ def _check_empty_circles(points, tri, fixed) -> None:
     if len(pairs) == 0:
         return
     p = points
-    inside = _incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]]) > 0
+    inside = incircle_many(p[pairs[:, 0]], p[pairs[:, 1]], p[pairs[:, 2]], p[pairs[:, 3]]) > 0
     if inside.any():
         u, v, _, z, k = (int(x) for x in pairs[np.argmax(inside)])
         raise CheckFailure(

@@ -1,6 +1,6 @@
 """Hidden checks for the interpolation assignment: the real grading.
 
-Nodes and weights are compared with ``reference.interpolation``; weights at
+Nodes and weights are compared with ``reference``; weights at
 any common scale (only ratios matter), including degrees where binomials and
 factorials overflow. ``lagrange_interp`` is called with weights at odd scales
 (the lecture's raw binomials, the reference times 3.7, a sign flip), several
@@ -41,7 +41,7 @@ from scipy.interpolate import barycentric_interpolate as scipy_barycentric
 
 from autograder.compare import expect_array
 
-from reference.interpolation import (
+from reference import (
     barycentric_interpolate,
     barycentric_weights,
     chebyshev_nodes,
@@ -191,7 +191,7 @@ class Problem:
         value = barycentric_interpolate(self.x, self.f, self.t, self.w)
         theirs = scipy_barycentric(self.x, self.f, self.t)
         if np.max(np.abs(value - theirs)) > self.tol():
-            raise RuntimeError("reference.interpolation and scipy.interpolate disagree on "
+            raise RuntimeError("reference and scipy.interpolate disagree on "
                                f"{self.about}: fix the oracle.")
         return value
 

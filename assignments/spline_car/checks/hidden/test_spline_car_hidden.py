@@ -1,6 +1,6 @@
 """Hidden checks for the spline car: the real grading.
 
-``spline_coefficients`` is compared with ``reference.splines.CubicSpline``
+``spline_coefficients`` is compared with ``reference.CubicSpline``
 (natural end conditions; its ``c`` array read as rows [a, b, c, d]) on named
 point sets, after staged property checks that say what is wrong (passes
 through the points, C2 at the interior knots, S'' = 0 at the ends). A
@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from autograder.compare import CheckFailure, describe
-from reference.data import car
-from reference.splines import CubicSpline
+from reference import car
+from reference import CubicSpline
 
 
 import spline_feedback as judge  # checks/public/spline_feedback.py: on sys.path while checks run

@@ -11,7 +11,9 @@ The properties are read from the coefficients themselves, so a check can say
 
 Drawings are judged by the distance between the drawn points and the
 reference drawing (:mod:`autograder.curves`), with the two pictures attached
-side by side.
+side by side. The reference drawing is made here, with SciPy's natural
+``CubicSpline`` in the chord-length parameter (the model solution is not
+part of a student's install, so released helpers never import it).
 """
 
 from __future__ import annotations
@@ -21,14 +23,19 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from autograder.compare import CheckFailure, describe, expect_array
-from autograder.curves import (
-    CurveDistance,
-    curve_points,
-    relative_curve_distance,
-    render_side_by_side,
-    strokes_points,
+from scipy.interpolate import CubicSpline
+
+from autograder.checks import (
+    CheckFailure,
+    Credit,
+    Feedback,
+    describe,
+    expect_array,
+    sentence,
+    show_number,
+    side_by_side,
 )
+from autograder.curves import CurveDistance, curve_points, relative_curve_distance
 
 NAME = "spline_coefficients(x, y)"
 
@@ -58,13 +65,9 @@ ASPECT_FRACTION = 0.75
 REFERENCE_SAMPLES = 2000
 
 
-def sentence(text: str) -> str:
-    return text[:1].upper() + text[1:] + "."
-
-
 def num(value: float) -> str:
-    """A number for a message: short, but never rounded to a misleading 0."""
-    return f"{value:.4g}"
+    """A number for a message: short, but never rounded into an integer it is not."""
+    return show_number(value, digits=4)
 
 
 # ---------------------------------------------------------------------------
@@ -309,13 +312,49 @@ def grade_eval(got: Any, x: np.ndarray, t: np.ndarray, expected: np.ndarray, *,
 # drawings
 # ---------------------------------------------------------------------------
 
+def stroke_spline(stroke: np.ndarray, *, parametrization: str = "chord",
+                  bc_type: str = "natural") -> CubicSpline:
+    """The parametric cubic spline through a stroke's points: x(s) and y(s) in one spline.
+
+    ``s`` is the chord length (``s_k = s_(k-1) + |P_k - P_(k-1)|``) or, for
+    ``parametrization="uniform"``, the point number; points that repeat the one
+    before them are dropped (they would make two equal knots).
+    """
+    pts = np.asarray(stroke, dtype=float)
+    steps = np.hypot(*np.diff(pts, axis=0).T)
+    pts = np.concatenate([pts[:1], pts[1:][steps > 0]])
+    steps = steps[steps > 0] if parametrization == "chord" else np.ones(int(np.sum(steps > 0)))
+    if len(pts) < 2:
+        raise ValueError("a stroke needs two distinct points")
+    s = np.concatenate([[0.0], np.cumsum(steps)])
+    return CubicSpline(s, pts, bc_type=bc_type)
+
+
+def sample_strokes(strokes: Sequence[np.ndarray], num: int = REFERENCE_SAMPLES,
+                   **options: str) -> np.ndarray:
+    """``num`` points along each stroke's spline (see :func:`stroke_spline`), stacked."""
+    parts = []
+    for stroke in strokes:
+        spline = stroke_spline(stroke, **options)
+        parts.append(spline(np.linspace(spline.x[0], spline.x[-1], num)))
+    return np.concatenate(parts)
+
+
+def draw_reference(strokes: Sequence[np.ndarray]) -> Callable[[Any], object]:
+    """A function that draws the reference car (or shape) on a matplotlib ``Axes``."""
+    def draw(ax: Any) -> None:
+        for stroke in strokes:
+            curve = sample_strokes([stroke], 200)
+            ax.plot(curve[:, 0], curve[:, 1], "-", color="k", linewidth=2,
+                    solid_capstyle="round")
+        ax.set_aspect("equal")
+    return draw
+
+
 def _alternatives(strokes: Sequence[np.ndarray]) -> dict[str, Callable[[], np.ndarray]]:
     """Typical wrong drawings of ``strokes`` and the hint each one deserves."""
-    from reference.splines import parametric_spline
-
-    def drawn(**options: Any) -> Callable[[], np.ndarray]:
-        return lambda: np.concatenate(
-            [parametric_spline(s, **options).sample(REFERENCE_SAMPLES) for s in strokes])
+    def drawn(**options: str) -> Callable[[], np.ndarray]:
+        return lambda: sample_strokes(strokes, **options)
 
     def polyline() -> np.ndarray:
         t = np.linspace(0.0, 1.0, 50)[:-1, None]
@@ -352,18 +391,21 @@ def _gap_message(dist: CurveDistance, what: str) -> str:
     return "; ".join(parts)
 
 
-def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Any, feedback: Any, *,
-                  what: str = "car", name: str = "draw_car(strokes)") -> None:
+def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Credit, feedback: Feedback,
+                  *, what: str = "car", name: str = "draw_car(strokes)",
+                  picture_shown: bool = True) -> None:
     """Judge a drawing of ``strokes`` and attach it beside the reference.
 
     Full points when the relative Hausdorff distance is at most
     ``DRAWING_PASS`` (and the axes have equal aspect), half up to
     ``DRAWING_HALF``, none beyond; messages say what is missing or extra.
+    ``picture_shown`` is False for hidden checks: their pictures (of unseen
+    data) never reach the student, so the message does not mention them.
     """
     strokes = [np.asarray(s, dtype=float) for s in strokes]
-    png = fig.get("png") if isinstance(fig, dict) else None
-    feedback.image(f"your {what} beside the reference", render_side_by_side(
-        png, strokes, title=f"{name}: your drawing (left) and the reference (right)"))
+    feedback.image(f"your {what} beside the reference", side_by_side(
+        fig if isinstance(fig, dict) else None, draw_reference(strokes),
+        title=f"{name}: your drawing (left) and the reference (right)"))
     if not isinstance(fig, dict) or not isinstance(fig.get("axes"), list):
         raise CheckFailure(f"{name} should return the matplotlib Figure it drew on "
                            "(fig, ax = plt.subplots() ... return fig); got "
@@ -372,8 +414,7 @@ def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Any, feedback
     if len(points) == 0:
         raise CheckFailure(f"The figure returned by {name} has no curves on it. Draw each "
                            "stroke with ax.plot on the axes of the figure you return.")
-    reference = strokes_points(strokes, num=REFERENCE_SAMPLES)
-    dist = relative_curve_distance(points, reference)
+    dist = relative_curve_distance(points, sample_strokes(strokes))
     if dist.worst <= DRAWING_PASS:
         if not any(ax.get("aspect") == "equal" for ax in fig["axes"] if isinstance(ax, dict)):
             credit.partial(ASPECT_FRACTION,
@@ -383,8 +424,8 @@ def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Any, feedback
     far = f"{dist.worst:.1%} of" if dist.worst < 1.0 else f"{dist.worst:.3g} times"
     message = (f"Your drawing is {far} the {what}'s size (the diagonal of its "
                f"bounding box, {dist.scale:.3g} units) away from the reference; up to "
-               f"{DRAWING_PASS:.0%} is allowed: {_gap_message(dist, what)}. Compare the two "
-               "pictures attached.")
+               f"{DRAWING_PASS:.0%} is allowed: {_gap_message(dist, what)}."
+               + (" Compare the two pictures attached." if picture_shown else ""))
     hint = _diagnose(points, strokes, dist)
     if hint:
         message += " " + hint
@@ -394,7 +435,7 @@ def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Any, feedback
 
 
 def _diagnose(points: np.ndarray, strokes: Sequence[np.ndarray], dist: CurveDistance) -> str:
-    """The hint of the typical mistake the drawing matches, if any."""
+    """The hint of the typical mistake the drawing matches, if it measurably matches one."""
     for hint, build in _alternatives(strokes).items():
         try:
             other = relative_curve_distance(points, build())

@@ -1,0 +1,290 @@
+"""Helpers of the service tests: a real server in a subprocess, a PostgreSQL cluster, WebDriver.
+
+The WebDriver client is the same standard-library approach as
+``tests/autograder/test_browser.py`` (chromedriver's W3C HTTP interface, no
+Selenium), with the element commands a form-filling test needs.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import json
+import os
+import pwd
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+ROOT = Path(__file__).resolve().parents[2]
+HULL_EXAMPLES = ROOT / "assignments" / "hull" / "examples"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--disable-dev-shm-usage", "--hide-scrollbars"]
+#: start-up imports numpy, pytest and SQLAlchemy; on a busy 2-core machine that is slow
+START_TIMEOUT = 240.0
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+# -- PostgreSQL ------------------------------------------------------------------
+
+def postgres_bin() -> Path | None:
+    found = shutil.which("pg_ctl")
+    if found:
+        return Path(found).resolve().parent
+    versions = sorted(Path("/usr/lib/postgresql").glob("*/bin/pg_ctl"))
+    return versions[-1].parent if versions else None
+
+
+@dataclass
+class PostgresCluster:
+    """A throw-away cluster in a temporary folder, run by an unprivileged user."""
+
+    folder: Path
+    port: int
+    user: str | None  # the OS user running it (None: ourselves, when not root)
+    bin: Path
+
+    def _run(self, *argv: str, check: bool = True) -> subprocess.CompletedProcess[str]:
+        cmd = [str(self.bin / argv[0]), *argv[1:]]
+        if self.user is not None:
+            cmd = ["runuser", "-u", self.user, "--", *cmd]
+        return subprocess.run(cmd, check=check, capture_output=True, text=True, timeout=120)
+
+    def start(self) -> None:
+        data = self.folder / "data"
+        self._run("initdb", "-D", str(data), "-A", "trust", "-U", "postgres", "--no-sync",
+                  "-E", "UTF8")
+        options = (f"-c listen_addresses=127.0.0.1 -c port={self.port} "
+                   f"-c unix_socket_directories={self.folder} -c fsync=off "
+                   "-c max_connections=200 -c synchronous_commit=off")
+        self._run("pg_ctl", "-D", str(data), "-l", str(self.folder / "log"), "-w", "-t", "120",
+                  "-o", options, "start")
+
+    def stop(self) -> None:
+        self._run("pg_ctl", "-D", str(self.folder / "data"), "-m", "immediate", "-w", "stop",
+                  check=False)
+
+    def create_database(self, name: str) -> str:
+        import psycopg
+
+        with psycopg.connect(f"host=127.0.0.1 port={self.port} user=postgres dbname=postgres",
+                             autocommit=True) as conn:
+            conn.execute(f'CREATE DATABASE "{name}"')
+        return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{name}"
+
+
+def start_postgres(tmp: Path) -> PostgresCluster:
+    """Start a cluster; raise ``RuntimeError`` saying why when it cannot."""
+    binary = postgres_bin()
+    if binary is None:
+        raise RuntimeError("PostgreSQL is not installed (apt-get install postgresql; .ci/run does)")
+    user = None
+    if os.geteuid() == 0:  # postgres refuses to run as root
+        try:
+            pwd.getpwnam("postgres")
+        except KeyError:
+            raise RuntimeError("running as root and there is no 'postgres' user to run the "
+                               "cluster as (Debian's postgresql package creates it)") from None
+        user = "postgres"
+    folder = tmp / "pg"
+    folder.mkdir()
+    os.chmod(tmp, 0o755)
+    if user is not None:
+        shutil.chown(folder, user, user)
+    cluster = PostgresCluster(folder, free_port(), user, binary)
+    try:
+        cluster.start()
+    except subprocess.CalledProcessError as exc:
+        raise RuntimeError(f"the PostgreSQL cluster did not start: {exc.stderr[-500:]}") from None
+    return cluster
+
+
+# -- the service -------------------------------------------------------------------
+
+def write_course(folder: Path, *, body: str, roster: list[tuple[str, str, str, str]]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    with (folder / "roster.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["id", "name", "email", "role"])
+        writer.writerows(roster)
+    path = folder / "course.toml"
+    path.write_text(body)
+    return path
+
+
+@dataclass
+class Server:
+    """``autograder serve`` in a subprocess on 127.0.0.1 and a free port."""
+
+    course: Path
+    database: str
+    jobs: int = 2
+    lease: float = 6.0
+    port: int = field(default_factory=free_port)
+    proc: subprocess.Popen[bytes] | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self) -> "Server":
+        log = (self.course.parent / "serve.log").open("ab")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "autograder", "serve", str(self.course), "--port", str(self.port),
+             "--database", self.database, "--jobs", str(self.jobs), "--lease", str(self.lease)],
+            stdout=log, stderr=subprocess.STDOUT, cwd=self.course.parent, start_new_session=True)
+        deadline = time.monotonic() + START_TIMEOUT
+        while True:
+            try:
+                if httpx.get(self.url + "/login", timeout=5).status_code == 200:
+                    return self
+            except httpx.HTTPError:
+                pass
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise AssertionError(f"the service did not start; see {self.course.parent / 'serve.log'}:\n"
+                                     + (self.course.parent / "serve.log").read_text()[-3000:])
+            time.sleep(0.3)
+
+    def kill(self) -> None:
+        """SIGKILL the service process only (its grading processes die with it)."""
+        assert self.proc is not None
+        self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(30)
+
+    def stop(self) -> None:
+        if self.proc is None or self.proc.poll() is not None:
+            return
+        self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(60)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait(30)
+
+    def tokens(self) -> dict[str, str]:
+        data = self.course.parent / "data" / "tokens.csv"
+        with data.open() as handle:
+            return {row["id"]: row["token"] for row in csv.DictReader(handle)}
+
+
+def upload(client: httpx.Client, url: str, token: str, assignment: str, data: bytes,
+           name: str = "hull.ipynb") -> httpx.Response:
+    return client.post(f"{url}/assignments/{assignment}/submissions",
+                       headers={"Authorization": f"Bearer {token}", "Accept": "application/json"},
+                       files={"notebook": (name, data, "application/x-ipynb+json")})
+
+
+def wait_graded(client: httpx.Client, url: str, token: str, sub_id: int,
+                timeout: float = 600.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while True:
+        view = client.get(f"{url}/api/submissions/{sub_id}",
+                          headers={"Authorization": f"Bearer {token}"}).json()
+        if view["status"] not in ("queued", "running") or time.monotonic() > deadline:
+            return view
+        time.sleep(0.3)
+
+
+# -- WebDriver ---------------------------------------------------------------------
+
+class WebDriver:
+    """The WebDriver commands the service tests need, over chromedriver's HTTP interface."""
+
+    def __init__(self, port: int, profile: Path, downloads: Path) -> None:
+        self.base = f"http://127.0.0.1:{port}"
+        caps = {"browserName": "chrome", "goog:chromeOptions": {
+            "binary": CHROMIUM, "args": [*FLAGS, f"--user-data-dir={profile}"],
+            "prefs": {"download.default_directory": str(downloads)}}}
+        self.session = self._call("POST", "/session", {"capabilities": {"alwaysMatch": caps}})["sessionId"]
+
+    def _call(self, method: str, path: str, body: dict[str, Any] | None = None) -> Any:
+        data = json.dumps(body if body is not None else {}).encode() if method == "POST" else None
+        request = urllib.request.Request(self.base + path, data=data, method=method,
+                                         headers={"Content-Type": "application/json"})
+        try:
+            with urllib.request.urlopen(request, timeout=120) as response:
+                return json.loads(response.read())["value"]
+        except urllib.error.HTTPError as exc:
+            raise AssertionError(f"WebDriver {method} {path}: {exc.read()[:2000]!r}") from None
+
+    def command(self, method: str, path: str, body: dict[str, Any] | None = None) -> Any:
+        return self._call(method, f"/session/{self.session}{path}", body)
+
+    def open(self, url: str) -> None:
+        self.command("POST", "/url", {"url": url})
+
+    @property
+    def url(self) -> str:
+        return str(self.command("GET", "/url"))
+
+    def run(self, script: str, *args: Any) -> Any:
+        return self.command("POST", "/execute/sync", {"script": script, "args": list(args)})
+
+    def find(self, css: str) -> str:
+        found = self.command("POST", "/element", {"using": "css selector", "value": css})
+        return str(next(iter(found.values())))
+
+    def type(self, css: str, text: str) -> None:
+        self.command("POST", f"/element/{self.find(css)}/value", {"text": text})
+
+    def click(self, css: str) -> None:
+        self.command("POST", f"/element/{self.find(css)}/click")
+
+    def text(self, css: str) -> str:
+        return str(self.command("GET", f"/element/{self.find(css)}/text"))
+
+    def wait_for(self, script: str, timeout: float = 600.0) -> Any:
+        deadline = time.monotonic() + timeout
+        while True:
+            value = self.run(script)
+            if value or time.monotonic() > deadline:
+                return value
+            time.sleep(0.3)
+
+    def screenshot(self, path: Path) -> Path:
+        path.write_bytes(base64.b64decode(self.command("GET", "/screenshot")))
+        return path
+
+    def quit(self) -> None:
+        try:
+            self._call("DELETE", f"/session/{self.session}")
+        except (AssertionError, OSError):
+            pass
+
+
+def start_chromedriver(folder: Path) -> tuple[subprocess.Popen[bytes], WebDriver]:
+    port = free_port()
+    driver = subprocess.Popen([str(CHROMEDRIVER), f"--port={port}",
+                               f"--log-path={folder / 'chromedriver.log'}"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/status", timeout=2):
+                break
+        except OSError:
+            if time.monotonic() > deadline or driver.poll() is not None:
+                driver.kill()
+                raise AssertionError(f"chromedriver did not start; see {folder}") from None
+            time.sleep(0.1)
+    (folder / "profile").mkdir(exist_ok=True)
+    (folder / "downloads").mkdir(exist_ok=True)
+    return driver, WebDriver(port, folder / "profile", folder / "downloads")
