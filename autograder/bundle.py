@@ -12,7 +12,6 @@ every path the sandbox lets student code read) and loaded from there.
 
 from __future__ import annotations
 
-import functools
 import gzip
 import hashlib
 import io
@@ -84,12 +83,13 @@ def make_bundle(assignment: Assignment) -> Bundle:
     return Bundle(name=root.name, data=data, digest=hashlib.sha256(data).hexdigest())
 
 
-@functools.cache
 def engine_fingerprint() -> str:
     """SHA-256 over the sources of ``autograder`` and ``reference`` and the engine version.
 
     A worker compares it with the client's before grading: a different engine or
     reference package could give different scores under the same result key.
+    Computed afresh each time (a few milliseconds), so a long-lived client that
+    was upgraded on disk is compared as it now is.
     """
     import reference  # the model solutions the checks import
 

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from autograder import api
+from autograder.backends import DaskSpec, TLSFiles
 from autograder.errors import AutograderError, UsageError
 from autograder.sandbox import probe_support
 from autograder.grading import GradingOptions
@@ -61,6 +62,13 @@ def build_parser() -> argparse.ArgumentParser:
                      help="for CI runs: print a 'Points X/Y' line per submission (GitHub Classroom), "
                           "append a Markdown report to $GITHUB_STEP_SUMMARY when set, no progress bar; "
                           "the exit status is non-zero only when grading itself failed")
+    grd.add_argument("--dask", default=None, metavar="ADDRESS",
+                     help="grade on a Dask cluster: local:N (N worker processes on this machine), "
+                          "tls://HOST:PORT, or tcp://127.0.0.1:PORT (needs numgrade[dask])")
+    grd.add_argument("--shard", default=None, metavar="K/N",
+                     help="grade only shard K of N (0 <= K < N), chosen by a hash of each id; "
+                          "combine the shards' folders with `autograder merge`")
+    _cluster_security_options(grd)
 
     gsc = commands.add_parser("gradescope", help="write the autograder zip for Gradescope")
     gsc.add_argument("assignment", help="a folder name under assignments/ or a path to one")
@@ -88,7 +96,71 @@ def build_parser() -> argparse.ArgumentParser:
                      help="assignment name or folder (default: the folder the notebook is in)")
     _timing_options(chk)
     _service_commands(commands)
+    _cluster_commands(commands)
     return parser
+
+
+def _cluster_commands(commands: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    mrg = commands.add_parser("merge", help="merge the results folders of shards into one")
+    mrg.add_argument("folders", nargs="+", type=Path, help="the --out folders of the shards")
+    mrg.add_argument("--out", type=Path, required=True, help="the merged results folder")
+    mrg.add_argument("--assignment", default=None, help="assignment name or folder (for the summary's title)")
+    mrg.add_argument("--junit", type=Path, default=None, metavar="FILE",
+                     help="also write a JUnit XML report of the merged results to FILE")
+
+    wrk = commands.add_parser("worker", help="serve grading slots to a Dask scheduler (a grading node)")
+    wrk.add_argument("address", help="the scheduler: tls://HOST:PORT, or tcp://127.0.0.1:PORT")
+    wrk.add_argument("--slots", type=_positive_int, default=1,
+                     help="gradings at a time on this machine, one process each (default: 1)")
+    _cluster_security_options(wrk)
+
+
+def _cluster_security_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--insecure", action="store_true",
+                        help="allow a plain tcp:// scheduler on another machine (Dask's messages are "
+                             "pickled: only on a network nobody else can reach)")
+    parser.add_argument("--tls-ca-file", type=Path, default=None, metavar="PEM",
+                        help="certificate authority for a tls:// scheduler")
+    parser.add_argument("--tls-cert", type=Path, default=None, metavar="PEM",
+                        help="this machine's certificate for a tls:// scheduler")
+    parser.add_argument("--tls-key", type=Path, default=None, metavar="PEM",
+                        help="this machine's private key (if not in --tls-cert)")
+
+
+def _tls(args: argparse.Namespace) -> "TLSFiles | None":
+    if args.tls_ca_file is None and args.tls_cert is None:
+        if args.tls_key is not None:
+            raise UsageError("--tls-key needs --tls-ca-file and --tls-cert.")
+        return None
+    if args.tls_ca_file is None or args.tls_cert is None:
+        raise UsageError("tls:// needs both --tls-ca-file and --tls-cert (and --tls-key unless "
+                         "the key is in the certificate file).")
+    return TLSFiles(ca_file=args.tls_ca_file, cert=args.tls_cert, key=args.tls_key)
+
+
+def _dask(args: argparse.Namespace) -> "DaskSpec | None":
+    if args.dask is None:
+        if args.insecure or args.tls_ca_file or args.tls_cert:
+            raise UsageError("--insecure and --tls-* options are for --dask ADDRESS.")
+        return None
+    return DaskSpec(args.dask, tls=_tls(args), insecure=args.insecure)
+
+
+def _merge(args: argparse.Namespace) -> int:
+    report = api.merge(args.folders, out=args.out, assignment=args.assignment, junit=args.junit)
+    print(f"Merged {len(report.results)} result(s) from {len(report.sources)} folder(s) into "
+          f"{args.out}: {args.out / 'grades.csv'}, {args.out / 'summary.html'}")
+    errors = [r for r in report.results if r.outcome == "error"]
+    for failed in errors:
+        print(f"error: the grader failed on {failed.source}: {failed.output}", file=sys.stderr)
+    return 1 if errors else 0
+
+
+def _worker(args: argparse.Namespace) -> int:
+    print(f"autograder worker: serving {args.slots} grading slot(s) to {args.address}; "
+          "Ctrl-C stops.", file=sys.stderr)
+    api.run_worker(args.address, slots=args.slots, tls=_tls(args), insecure=args.insecure)
+    return 0
 
 
 def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
@@ -138,6 +210,7 @@ def _grade(args: argparse.Namespace) -> int:
     quiet = args.no_progress or args.ci
     report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
                        options=_options(args), progress=False if quiet else None,
+                       dask=_dask(args), shard=args.shard,
                        junit=args.junit)
     if args.ci:
         summary_file = os.environ.get("GITHUB_STEP_SUMMARY") or None
@@ -152,7 +225,10 @@ def _grade(args: argparse.Namespace) -> int:
     print(f"Graded {report.graded} submission(s), reused {report.reused} unchanged result(s) "
           f"in {report.seconds:.1f} s; mean score {mean:.1f}%.")
     print("Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
-    print(f"Results: {args.out / 'grades.csv'} and {args.out}/<id>/results.json")
+    if report.other_shards:
+        print(f"Shard {args.shard}: {report.other_shards} submission(s) left to the other shards.")
+    print(f"Results: {args.out / 'grades.csv'} ({len(report.folder)} row(s), every result in the "
+          f"folder) and {args.out}/<id>/results.json")
     print(f"Feedback: {args.out}/<id>/feedback.html; class summary: {args.out / 'summary.html'}")
     if args.junit is not None:
         print(f"JUnit XML: {args.junit}")
@@ -248,8 +324,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     handlers = {"release": _release, "grade": _grade, "check": _check, "gradescope": _gradescope,
                 "new": _new, "validate": _validate,
-                "serve": _serve, "roster": _roster, "submit": _submit}
-    if args.command in ("grade", "check", "serve", "validate"):
+                "serve": _serve, "roster": _roster, "submit": _submit,
+                "merge": _merge, "worker": _worker}
+    if args.command in ("grade", "check", "serve", "validate", "worker"):
         _say_missing_protections()
     try:
         return handlers[args.command](args)

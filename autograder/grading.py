@@ -93,10 +93,28 @@ def submission_seed(assignment: Assignment, student: str) -> int:
 _NOT_GRADED = frozenset({"examples", "__pycache__", ".ipynb_checkpoints", ".pytest_cache", ".git"})
 
 
-@functools.lru_cache(maxsize=32)
 def assignment_digest(assignment: Assignment) -> str:
-    """SHA-256 over the files of the assignment folder that grading reads."""
-    return _tree_digest(assignment.root, skip=_NOT_GRADED)
+    """SHA-256 over the files of the assignment folder that grading reads.
+
+    The contents are hashed again whenever a file's size or modification time
+    changes, so an edit made while a service or a batch runs is never missed.
+    """
+    return _cached_tree_digest(assignment.root, _stat_signature(assignment.root, _NOT_GRADED))
+
+
+def _stat_signature(root: Path, skip: frozenset[str]) -> tuple[tuple[str, int, int], ...]:
+    found = []
+    for directory, subdirs, files in os.walk(root):
+        subdirs[:] = sorted(d for d in subdirs if d not in skip)
+        for name in sorted(files):
+            info = os.stat(os.path.join(directory, name))
+            found.append((os.path.join(directory, name), info.st_size, info.st_mtime_ns))
+    return tuple(found)
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_tree_digest(root: Path, signature: tuple[tuple[str, int, int], ...]) -> str:
+    return _tree_digest(root, skip=_NOT_GRADED)
 
 
 @functools.cache
@@ -199,8 +217,10 @@ class Grader:
 
     def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None) -> SubmissionResult:
         cells = [(c.index, c.source) for c in notebook.cells]
-        forbidden = forbidden_functions(self.assignment, [c.source for c in notebook.cells],
-                                        [c.index for c in notebook.cells])
+        sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
+        report = staticscan.scan(sources, self.assignment.rules.forbid) \
+            if self.assignment.rules.forbid else staticscan.ScanReport()
+        forbidden = forbidden_functions(self.assignment, sources, numbers, report)
         notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
         call_timeout = self.options.call_timeout or self.assignment.call_timeout
         session = StudentSession(
@@ -216,7 +236,8 @@ class Grader:
         outcome = ("timeout" if run.timed_out_cells else
                    "crashed" if run.crashed or run.crashed_cells else "graded")
         result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)
-        return replace(result, stdout=run.stdout, notes=tuple(run.notes) + tuple(notebook.warnings),
+        return replace(result, stdout=run.stdout,
+                       notes=tuple(run.notes) + tuple(notebook.warnings) + review_notes(report, numbers),
                        cpu_seconds=round(session.cpu_seconds, 3),
                        cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
                                          for c in run.cells if not c.ok))
@@ -303,12 +324,33 @@ def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> i
             os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = previous
 
 
+#: how a note that asks for a person starts (the class summary lists such submissions)
+REVIEW_PREFIX = "For the instructor: "
+
+
+def review_notes(report: staticscan.ScanReport, cell_numbers: Sequence[int]) -> tuple[str, ...]:
+    """Notes for the "needs a person" list: code the scan could not verify.
+
+    The worker's guard still blocks forbidden libraries at run time whatever the
+    spelling; these notes let a person see why the scan could not tell.
+    """
+    if not report.dynamic:
+        return ()
+    places = "; ".join(
+        f"`{use.name}` in cell {(cell_numbers[use.cell] if use.cell < len(cell_numbers) else use.cell) + 1}"
+        f", line {use.line}" for use in report.dynamic[:5])
+    reaching = ", ".join(sorted(report.unverified)[:10]) or "no top-level function"
+    return (f"{REVIEW_PREFIX}the code scan could not verify {len(report.dynamic)} place(s) "
+            f"({places}); reached from: {reaching}.",)
+
+
 def forbidden_functions(assignment: Assignment, sources: Sequence[str],
-                        cell_numbers: Sequence[int]) -> dict[str, str]:
+                        cell_numbers: Sequence[int],
+                        report: staticscan.ScanReport | None = None) -> dict[str, str]:
     """Map each student function that uses a forbidden name to the message for it."""
     if not assignment.rules.forbid:
         return {}
-    report = staticscan.scan(sources, assignment.rules.forbid)
+    report = report or staticscan.scan(sources, assignment.rules.forbid)
     messages: dict[str, str] = {}
     for function in sorted(report.tainted):
         use = next((u for u in report.uses if u.function == function), None) or \
@@ -380,6 +422,6 @@ def _file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
-           "forbidden_functions", "run_pytest", "submission_key", "submission_seed",
+__all__ = ["ENGINE_VERSION", "REVIEW_PREFIX", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
+           "forbidden_functions", "review_notes", "run_pytest", "submission_key", "submission_seed",
            "summarise_run"]

@@ -241,6 +241,10 @@ class _Ctx:
     sink: _Sink
 
 
+#: statements (top level and in function bodies) the scan walks before it stops
+MAX_STATEMENTS = 50_000
+
+
 class _Analyzer:
     """One scan: module state, deferred bodies, findings."""
 
@@ -253,6 +257,9 @@ class _Analyzer:
         self.dynamic: list[Use] = []
         self.errors: list[str] = []
         self.transformer = TransformerManager()
+        #: statements walked so far; past MAX_STATEMENTS the scan stops (a count, not a
+        #: clock, so the same code always gets the same report)
+        self.statements = 0
 
     # -- cells and parsing ---------------------------------------------------------
 
@@ -286,7 +293,14 @@ class _Analyzer:
 
     def _guarded(self, step: Callable[[ast.AST, _Ctx], None], node: ast.AST,
                  ctx: _Ctx) -> None:
-        """Run ``step(node, ctx)``; code too deep to walk becomes unverifiable."""
+        """Run ``step(node, ctx)``; code too deep or too long to walk becomes unverifiable."""
+        self.statements += 1
+        if self.statements == MAX_STATEMENTS + 1:
+            self._error(ctx.where, ctx.where.line(node), f"the scan stopped after "
+                        f"{MAX_STATEMENTS} statements; the rest was not checked")
+            self._dynamic("<not scanned: too long>", node, ctx)
+        if self.statements > MAX_STATEMENTS:
+            return
         try:
             step(node, ctx)
         except RecursionError:
@@ -697,14 +711,19 @@ class _Analyzer:
 
 def _closure(module: dict[str, _Def], seed: Callable[[_Def], bool]) -> frozenset[str]:
     """Names whose definition satisfies ``seed`` or references such a name."""
+    # A search over reversed edges: linear in the names and references, where a
+    # repeat-until-stable sweep is quadratic on a long chain of one-line functions.
+    users: dict[str, list[str]] = {}
+    for name, definition in module.items():
+        for ref in definition.sink.refs:
+            users.setdefault(ref, []).append(name)
     marked = {name for name, d in module.items() if seed(d)}
-    changed = True
-    while changed:
-        changed = False
-        for name, definition in module.items():
-            if name not in marked and definition.sink.refs & marked:
-                marked.add(name)
-                changed = True
+    stack = list(marked)
+    while stack:
+        for user in users.get(stack.pop(), ()):
+            if user not in marked:
+                marked.add(user)
+                stack.append(user)
     return frozenset(marked)
 
 

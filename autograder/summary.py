@@ -49,7 +49,10 @@ CONCERNS = {
     "check-error": "a check itself failed",
     "forbidden": "uses a banned call",
     "hard-coding": "suspected hard-coding",
+    "unverified": "code the scan could not verify",
 }
+#: how a result note addressed to the instructor starts (see autograder.grading)
+_REVIEW_PREFIX = "For the instructor: "
 
 
 @dataclass(frozen=True)
@@ -209,6 +212,9 @@ def concerns(result: SubmissionResult) -> tuple[Concern, ...]:
         if names:
             first = next(c.output for c in result.tests if c.kind == kind)
             found.append(Concern(kind, f"{_names(names)}: {_short(first)}"))
+    review = [n[len(_REVIEW_PREFIX):] for n in result.notes if n.startswith(_REVIEW_PREFIX)]
+    if review:
+        found.append(Concern("unverified", _short(" ".join(review))))
     if suspected_hard_coding(result):
         unseen = unseen_checks(result)
         found.append(Concern("hard-coding",

@@ -12,7 +12,8 @@
 2. :func:`install_filter` last: a seccomp filter that makes ``socket()`` and
    ``socketpair()`` fail with ``EPERM`` for every family (UNIX pathname and
    abstract, UDP, MPTCP, raw, ping, netlink, ...), keeps the keyrings, ``memfd``
-   files and ``io_uring`` out of reach, and, where no IPC namespace could be
+   files and ``io_uring`` out of reach, keeps every process in the child's process
+   group (no ``setsid``/``setpgid``), and, where no IPC namespace could be
    made, System V IPC and POSIX message queues as well. Sockets that are already
    open (the child's channel to the grader) keep working: seccomp filters new
    system calls, not descriptors.
@@ -63,13 +64,19 @@ PR_SET_DUMPABLE = 4
 #: already open), kernel keyrings (shared by every process of a user, they outlive
 #: the child), memfd files (their pages escape RLIMIT_AS) and io_uring (it can open
 #: sockets and files without the system calls above, IORING_OP_SOCKET since 5.19).
-#: Nothing the worker runs after the sandbox (IPython, numpy, matplotlib) needs them;
-#: ``multiprocessing`` pools use pipes, but ``multiprocessing.Pipe()`` (duplex) fails.
+#: Also ``setsid`` and ``setpgid``: the child made its own session before the filter,
+#: and every process it starts must stay in that process group, because killing a
+#: process group is atomic against ``fork`` (a fork that races a group signal is
+#: restarted and dies) while a sweep through /proc can always be one generation
+#: late. Nothing the worker runs after the sandbox (IPython, numpy, matplotlib)
+#: needs any of these; ``multiprocessing`` pools use pipes, but
+#: ``multiprocessing.Pipe()`` (duplex) and ``Popen(start_new_session=True)`` fail.
 ALWAYS_BLOCKED = (
     "socket", "socketpair",
     "add_key", "request_key", "keyctl",
     "memfd_create", "memfd_secret",
     "io_uring_setup", "io_uring_enter", "io_uring_register",
+    "setsid", "setpgid",
 )
 #: refused when the child has no IPC namespace of its own: these objects would
 #: outlive the child and be visible to the next submission of the same user.

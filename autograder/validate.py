@@ -207,9 +207,10 @@ def find_leaks(assignment: Assignment, released: Path) -> list[str]:
             leaks.append(f"{where} has the name of a hidden check")
         text = data.decode("utf-8", errors="replace")
         leaks += [f"{where} contains {marker!r}" for marker in FORBIDDEN_MARKERS if marker in text]
-        lines = _released_lines(path, text)
+        released_text = _released_text(path, text)
+        found = sorted(line for line in secret_lines if line in released_text)
         leaks += [f"{where} contains a solution or hidden-check line: {line!r}"
-                  for line in sorted(lines & secret_lines)[:5]]
+                  for line in found[:5]]
     return leaks
 
 
@@ -252,14 +253,16 @@ def _solution_lines(notebook: Path) -> set[str]:
     return inside - outside
 
 
-def _released_lines(path: Path, text: str) -> set[str]:
+def _released_text(path: Path, text: str) -> str:
+    """What a reader of ``path`` sees: a notebook's cell sources, any other file as it is
+    (secret lines are searched as substrings, so a line pasted into a sentence counts)."""
     if path.suffix == ".ipynb":
         try:
             nb = nbformat.reads(text, as_version=4)
         except Exception:  # nbformat raises many types; the raw text is scanned instead
-            return {d for d in map(_distinctive, text.splitlines()) if d}
-        text = "\n".join(cell.get("source", "") for cell in nb.cells)
-    return {d for d in map(_distinctive, text.splitlines()) if d}
+            return text
+        return "\n".join(cell.get("source", "") for cell in nb.cells)
+    return text
 
 
 # -- the table ---------------------------------------------------------------------

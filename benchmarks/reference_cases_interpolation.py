@@ -26,6 +26,7 @@ from reference import barycentric_interpolate, chebyshev_nodes
 
 N_NODES = 100
 N_EVAL = 1_000_000
+N_EXTRAPOLATE = 10_000
 BEZIER_DEGREE = 5
 SEED = 20240612
 TARGET = "no slower than SciPy"
@@ -54,9 +55,23 @@ def _bezier_pair() -> tuple[Callable[[], object], Callable[[], object]]:
     )
 
 
+def _extrapolation_pair() -> tuple[Callable[[], object], Callable[[], object]]:
+    """1e4 points outside the nodes (first form + Newton form, both scaled)."""
+    rng = np.random.default_rng(SEED + 2)
+    x = chebyshev_nodes(N_NODES - 1)
+    y = np.exp(x) * np.cos(8 * x)
+    t = rng.uniform(1.0, 3.0, N_EXTRAPOLATE) * rng.choice([-1.0, 1.0], N_EXTRAPOLATE)
+    return (
+        lambda: barycentric_interpolate(x, y, t),
+        lambda: si.barycentric_interpolate(x, y, t),
+    )
+
+
 def cases() -> list[Case]:
     return [
         ("barycentric 100 Chebyshev nodes, 1e6 points", *_barycentric_pair(), TARGET),
+        ("barycentric 100 nodes, 1e4 points outside (extrapolation)", *_extrapolation_pair(),
+         "finite, accurate; cost stated"),
         ("bezier degree 5 in 2-D, 1e6 points (vs BPoly)", *_bezier_pair(), TARGET),
     ]
 

@@ -26,9 +26,11 @@ Data
     :func:`car`, :data:`CAR_STROKE_NAMES`, :func:`save_car`,
     :func:`load_strokes`
 
-Every function validates its input first: masked and complex arrays are
-refused (``TypeError``), as are NaN, infinity and numbers too large for a
-double (``ValueError``), each with a message naming the argument. Integer
+Every function validates its input first. In the documentation, a *finite*
+array holds real numbers within the range of a double: masked and complex
+arrays, non-numbers, NaN, infinity and numbers too large for a double
+(``10**400``) are refused with a ``ValueError`` whose message names the
+argument and the rule; nothing is silently converted. Integer
 coordinates of any size a double can hold are used exactly by the geometric
 predicates.
 """

@@ -63,9 +63,8 @@ def incircle_many(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> NDA
     ValueError
         If a row's ``a, b, c`` are collinear (the first such row is named), an
         argument holds NaN, infinity, a number too large for a double or
-        non-numbers, or the shapes do not broadcast to ``(..., 2)``.
-    TypeError
-        If an argument is complex or a masked array.
+        non-numbers, is complex or a masked array, or the shapes do not
+        broadcast to ``(..., 2)``.
 
     Notes
     -----
@@ -136,7 +135,7 @@ def incircle(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> int:
     Raises
     ------
     ValueError
-        If a point does not have shape ``(2,)`` or holds NaN or infinity, or
+        If a point does not have shape ``(2,)`` or is not finite, or
         if ``a, b, c`` are collinear (they define no circle).
 
     Notes

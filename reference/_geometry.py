@@ -53,9 +53,8 @@ def orient2d_many(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> NDArray[np.int8]:
     ------
     ValueError
         If an argument holds NaN, infinity, a number too large for a double,
-        or non-numbers, or if the shapes do not broadcast to ``(..., 2)``.
-    TypeError
-        If an argument is complex or a masked array.
+        non-numbers, is complex or a masked array, or if the shapes do not
+        broadcast to ``(..., 2)``.
 
     Notes
     -----
@@ -117,12 +116,15 @@ def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
     int
         ``+1`` when ``p, q, r`` make a left (counter-clockwise) turn, ``-1``
         for a right (clockwise) turn and ``0`` when they are collinear. The
-        sign is exact for every finite double input.
+        sign is exact for every finite double input and for integers of any
+        size that a double can hold (beyond ``2**53`` they are not rounded:
+        the determinant is computed in exact integer arithmetic).
 
     Raises
     ------
     ValueError
-        If a point does not have shape ``(2,)`` or holds NaN or infinity.
+        If a point does not have shape ``(2,)`` or is not finite (see
+        :mod:`reference`: no NaN, infinity, complex or masked values).
 
     Notes
     -----
@@ -176,6 +178,12 @@ def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
     0.0
     >>> orient2d(p, [12, 12], [24, 24])
     1
+
+    Integers beyond ``2**53`` are not rounded (as doubles, the last two
+    points would be equal):
+
+    >>> orient2d([0, 0], [2**62, 2**62 + 1], [2**62 + 1, 2**62 + 2])
+    -1
     """
     return _orient_of(as_exact_point(p, "p"), as_exact_point(q, "q"), as_exact_point(r, "r"))
 
@@ -331,7 +339,8 @@ def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]
     Parameters
     ----------
     points : array_like, shape (n, 2)
-        Finite points, ``n >= 1``.
+        Finite points, ``n >= 1``: doubles, or integers of any size that a
+        double can hold (used exactly).
     method : {"monotone", "jarvis"}, optional
         ``"monotone"`` (default): Andrew's monotone chain, :math:`O(n \log n)`.
         ``"jarvis"``: Jarvis's march (gift wrapping), :math:`O(nh)` for
@@ -378,6 +387,17 @@ def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]
     vertex is visited once, so the loop ends after at most ``n`` steps; with a
     floating-point predicate the textbook version can loop forever on nearly
     collinear points (Kettner et al. 2008).
+
+    *Cost.* The monotone chain is :math:`O(n \log n)` and, thanks to the
+    prefilter, faster than SciPy's Qhull on random points (about 0.2x at
+    ``1e5`` points). Jarvis's march is :math:`O(nh)` (one vectorised pass over
+    all points per hull vertex): it is the model solution of the assignment,
+    not a fast hull, and runs 20 to 30 times slower than Qhull at ``1e6``
+    random points (``python benchmarks/reference_vs_scipy.py`` prints both).
+
+    *Integers.* Integer coordinates are used exactly: up to ``2**53`` as
+    doubles, beyond (int64 near ``2**62``, Python ints) in exact integer
+    arithmetic, without the prefilter.
 
     References
     ----------

@@ -857,17 +857,17 @@ def barycentric_interpolate(
     y1 = np.concatenate([y, np.ones((x.size, 1))], axis=1)
     flat = tt.ravel()
     out = np.empty((flat.size, y.shape[1]))
-    second = np.arange(flat.size)
+    second = None  # rows for the second formula: all of them, or these indices
     outside = (flat < x.min()) | (flat > x.max())
     if outside.any() and (weights is None or _are_polynomial_weights(x, w)):
         out[outside] = _extrapolate(x, y, flat[outside])
         second = np.flatnonzero(~outside)
-    pieces = list(_chunks(second.size, x.size))
+    del outside
+    pieces = list(_chunks(flat.size if second is None else second.size, x.size))
     if pieces:
         buf = np.empty((pieces[0].stop - pieces[0].start, x.size))
-        contiguous = second.size == flat.size
         for piece in pieces:
-            rows = piece if contiguous else second[piece]
+            rows = piece if second is None else second[piece]
             out[rows] = _interpolate_chunk(x, w, y1, flat[rows], buf)
     result = out.reshape(tt.shape + np.shape(values)[1:])
     return result[()] if result.ndim == 0 else result

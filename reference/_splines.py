@@ -49,8 +49,8 @@ def _prepare_xy(
     """Return clean ``x - origin`` (n,), ``y`` (n,) or (n, d) and the integer ``origin``.
 
     ``origin`` is 0 unless ``x`` holds integers beyond ``2**53`` (see
-    :func:`reference._validation.as_abscissae`); raises ``ValueError`` or
-    ``TypeError`` for invalid input.
+    :func:`reference._validation.as_abscissae`); raises ``ValueError`` for
+    invalid input.
     """
     x, origin = as_abscissae(x, "x", ndim=1)
     y = as_finite_array(y, "y")

@@ -6,13 +6,13 @@ Messages name the argument, state the rule and show what was received.
 
 What is refused everywhere, rather than silently changed:
 
-* masked arrays (the mask would be ignored): ``TypeError``;
-* complex numbers, even with a zero imaginary part (the maths is real):
-  ``TypeError``;
-* anything that is not a real number (strings, ``None``, objects):
-  ``ValueError``;
-* NaN, infinity, and numbers too large for a double (``10**400``):
-  ``ValueError``.
+* masked arrays (the mask would be ignored);
+* complex numbers, even with a zero imaginary part (the maths is real);
+* anything that is not a real number (strings, ``None``, objects);
+* NaN, infinity, and numbers too large for a double (``10**400``).
+
+Each raises ``ValueError`` (the exception every public function documents)
+with a message naming the argument and the rule.
 
 Integers are accepted at any size that a double can hold. The geometric
 predicates keep them exact (:func:`as_exact_array`); the numerical routines
@@ -57,7 +57,7 @@ def _parse(value: Any, name: str) -> NDArray[Any]:
     finiteness.
     """
     if isinstance(value, np.ma.MaskedArray):
-        raise TypeError(
+        raise ValueError(
             f"`{name}` must be a plain array, not a masked array (its mask would be "
             "ignored); pass `value.filled(...)` or `value.compressed()`."
         )
@@ -69,8 +69,8 @@ def _parse(value: Any, name: str) -> NDArray[Any]:
         ) from exc
     kind = arr.dtype.kind
     if kind == "c":
-        raise TypeError(
-            f"`{name}` must hold real numbers; got complex values (dtype {arr.dtype}). "
+        raise ValueError(
+            f"`{name}` must contain real values; got complex values (dtype {arr.dtype}). "
             "Pass the real part explicitly if that is what you mean."
         )
     if kind in "biuf":
@@ -78,8 +78,8 @@ def _parse(value: Any, name: str) -> NDArray[Any]:
     if kind == "O":
         for v in arr.reshape(-1):
             if isinstance(v, (complex, np.complexfloating)):
-                raise TypeError(
-                    f"`{name}` must hold real numbers; got the complex value {v!r}."
+                raise ValueError(
+                    f"`{name}` must contain real values; got the complex value {v!r}."
                 )
             if not isinstance(v, numbers.Real):
                 raise ValueError(
@@ -175,7 +175,7 @@ def as_exact_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> N
     if kind in "iu":
         if arr.size == 0 or (int(arr.max()) <= _EXACT_INT and int(arr.min()) >= -_EXACT_INT):
             return arr.astype(np.float64)
-        return _from_objects(arr.astype(object), name)
+        return arr.astype(object)  # Python ints; every int64/uint64 fits in a double
     if kind == "f" and arr.size and not isinstance(value, np.ndarray):
         # A list such as [2**53 + 1, 0.5] becomes float64 with the integer
         # rounded; read it again element by element.
@@ -187,7 +187,7 @@ def as_exact_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> N
                 return _from_objects(obj, name)
     if arr.dtype == np.longdouble and arr.dtype != np.float64:
         return _from_objects(arr.astype(object), name)
-    out = arr.astype(np.float64)
+    out = arr.astype(np.float64, copy=False)
     if not np.all(np.isfinite(out)):
         raise _not_finite(name)
     return out
@@ -196,10 +196,9 @@ def as_exact_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> N
 def as_finite_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> NDArray[np.float64]:
     """Return ``value`` as a finite float64 array (integers correctly rounded).
 
-    Raises ``TypeError`` for masked or complex input and ``ValueError`` naming
-    ``name`` when the value is not an array of real numbers, has the wrong
-    number of dimensions, holds NaN or infinity, or a number too large for a
-    double.
+    Raises ``ValueError`` naming ``name`` for masked or complex input, when
+    the value is not an array of real numbers, has the wrong number of
+    dimensions, holds NaN or infinity, or a number too large for a double.
     """
     arr = _parse(value, name)
     _check_ndim(arr, name, ndim)
@@ -207,7 +206,7 @@ def as_finite_array(value: ArrayLike, name: str, *, ndim: int | None = None) -> 
         arr = _from_objects(arr, name)
     with np.errstate(over="ignore"):
         try:
-            out = arr.astype(np.float64)
+            out = arr.astype(np.float64, copy=False)
         except OverflowError:  # pragma: no cover - caught by _from_objects
             raise _too_large(name, max(abs(v) for v in arr.reshape(-1))) from None
     if not np.all(np.isfinite(out)):

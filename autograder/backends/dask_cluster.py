@@ -184,6 +184,19 @@ def store_payload(out_dir: Path, job: Job, payload: Any, assignment: Assignment,
     return result
 
 
+def local_cluster(workers: int, **options: Any) -> LocalCluster:
+    """A cluster of ``workers`` processes on this machine, on loopback, one grading slot each.
+
+    Worker processes are started by Dask's nannies with ``spawn`` (never a fork
+    of this threaded process); ``options`` go to :class:`distributed.LocalCluster`.
+    """
+    settings: dict[str, Any] = dict(n_workers=workers, threads_per_worker=1, processes=True,
+                                    host="127.0.0.1", dashboard_address=None,
+                                    resources={RESOURCE: 1}, silence_logs=logging.ERROR)
+    settings.update(options)
+    return LocalCluster(**settings)
+
+
 class DaskBackend:
     """Grades on a Dask cluster; ``local:N`` starts one of N processes here for the run."""
 
@@ -193,9 +206,7 @@ class DaskBackend:
     def _connect(self) -> tuple[LocalCluster | None, Client]:
         workers = self.spec.local_workers
         if workers is not None:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   host="127.0.0.1", dashboard_address=None,
-                                   resources={RESOURCE: 1}, silence_logs=logging.ERROR)
+            cluster = local_cluster(workers)
             return cluster, Client(cluster)
         try:
             return None, Client(self.spec.address, security=security_for(self.spec.tls), timeout=30)
@@ -302,5 +313,5 @@ async def _serve(address: str, slots: int, security: Security | None) -> None:
         await asyncio.gather(*(n.close() for n in nannies), return_exceptions=True)
 
 
-__all__ = ["DaskBackend", "GradingSlots", "grade_task", "run_worker", "sandbox_notes",
+__all__ = ["DaskBackend", "GradingSlots", "grade_task", "local_cluster", "run_worker", "sandbox_notes",
            "security_for", "store_payload"]

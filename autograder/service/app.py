@@ -15,7 +15,6 @@ import datetime as dt
 import functools
 import hashlib
 import hmac
-import json
 import secrets
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,12 +25,11 @@ import jinja2
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
-from sqlalchemy import func, select, update
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from autograder.feedback import FEEDBACK_NAME
-from autograder.results import SubmissionResult
 from autograder.service import auth, gradebook, queue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.intake import UploadRejected, accept

@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from autograder.errors import NotebookError, UsageError
 from autograder.notebook import read_notebook
 from autograder.service import queue
-from autograder.service.course import Course
+from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
 from autograder.service.standing import deadline_for
 from autograder.service.storage import Storage
@@ -79,7 +79,8 @@ def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, 
     return submission
 
 
-def _check_open(session: Session, policy, user_id: str, now: dt.datetime) -> dt.datetime:
+def _check_open(session: Session, policy: AssignmentPolicy, user_id: str,
+                now: dt.datetime) -> dt.datetime:
     deadline = deadline_for(session, policy, user_id)
     if now < policy.opens:
         raise UploadRejected(f"{policy.title} opens on {policy.opens:%Y-%m-%d %H:%M} UTC; "

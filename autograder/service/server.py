@@ -24,7 +24,10 @@ def open_course(course_path: str | Path, *, database: str | None = None) -> Cour
         course = dataclasses.replace(course, database_url=database)
     for policy in course.assignments:
         load_assignment(policy.spec)  # fails now, with the loader's message, not at the first upload
+    # uploads, results, the SQLite file and tokens.csv: for the service's user only (the
+    # sandboxed worker runs as another user and must never read them)
     course.data_dir.mkdir(parents=True, exist_ok=True)
+    course.data_dir.chmod(0o700)
     return course
 
 

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import pytest
 
-from autograder.batch import assign_ids, collect_submissions
+from autograder.batch import RESERVED_NAMES, Shard, assign_ids, collect_submissions, place_name
 from autograder.errors import UsageError
-from autograder.report import grades_csv, read_result, write_result
+from autograder.report import atomic_write_text, grades_csv, read_result, write_result
 from autograder.results import CheckResult, SubmissionResult
 
 
@@ -17,7 +19,61 @@ def test_nbgrader_layout_gets_student_ids() -> None:
     paths = [Path("submitted/alice/hull/hull.ipynb"), Path("submitted/bob/hull/hull.ipynb"),
              Path("late/carol.ipynb")]
     ids = assign_ids(paths)
-    assert ids == {paths[0]: "alice-hull", paths[1]: "bob-hull", paths[2]: "carol"}
+    assert ids == {paths[0]: "alice", paths[1]: "bob", paths[2]: "carol"}
+
+
+def test_one_file_in_nbgrader_layout_gets_the_same_id_as_in_the_folder() -> None:
+    alone = Path("/course/submitted/alice/hull/hull.ipynb")
+    assert assign_ids([alone]) == {alone: "alice"}
+    assert place_name(alone) == "alice" and place_name(Path("/x/hull.ipynb")) == "hull"
+
+
+def test_two_notebooks_of_one_student_keep_apart() -> None:
+    paths = [Path("submitted/alice/hull/hull.ipynb"), Path("submitted/alice/hull/extra.ipynb")]
+    assert sorted(assign_ids(paths).values()) == ["alice-extra", "alice-hull"]
+    flat = [Path("a/x.ipynb"), Path("b/x.ipynb")]
+    assert sorted(assign_ids(flat).values()) == ["a-x", "b-x"]
+
+
+@pytest.mark.parametrize("name", ["grades.csv", "summary", "summary.html", "summary.json", "GRADES.CSV",
+                                  "junit.xml", "images"])
+def test_ids_never_clash_with_the_batch_files(name: str) -> None:
+    paths = [Path(f"in/{name}.ipynb"), Path(f"in/{name}.ipynb.ipynb"), Path("in/grades.csv-submission.ipynb")]
+    ids = assign_ids(paths)
+    assert len(set(ids.values())) == 3
+    assert not {i.lower() for i in ids.values()} & RESERVED_NAMES
+
+
+def test_shards_split_ids_deterministically() -> None:
+    ids = [f"student{i:03d}" for i in range(300)]
+    shards = [Shard.parse(f"{k}/3") for k in range(3)]
+    owners = [[s.holds(i) for s in shards].count(True) for i in ids]
+    assert owners == [1] * len(ids)
+    sizes = [sum(s.holds(i) for i in ids) for s in shards]
+    assert min(sizes) > 60  # a hash, not a range: every shard gets a fair share
+    # stable across processes and machines: SHA-256 of the id, not Python's hash()
+    names = ("alice", "bob", "carol", "dave", "erin", "frank")
+    assert [next(k for k, s in enumerate(shards) if s.holds(n)) for n in names] == [2, 2, 2, 1, 0, 2]
+    for bad in ("3/3", "1", "a/b", "-1/2", "0/0"):
+        with pytest.raises(UsageError, match="K/N"):
+            Shard.parse(bad)
+
+
+def test_result_files_follow_the_umask(tmp_path: Path) -> None:
+    previous = os.umask(0o027)
+    try:
+        write_result(tmp_path / "alice", _result("alice", {"a": 1}))
+        atomic_write_text(tmp_path / "grades.csv", "id\n")
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE((tmp_path / "alice" / "results.json").stat().st_mode) == 0o640
+    assert stat.S_IMODE((tmp_path / "grades.csv").stat().st_mode) == 0o640
+    previous = os.umask(0o022)
+    try:
+        atomic_write_text(tmp_path / "grades.csv", "id\n")
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE((tmp_path / "grades.csv").stat().st_mode) == 0o644
 
 
 def test_ids_stay_unique_after_slugging() -> None:
@@ -69,3 +125,78 @@ def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.Mo
     monkeypatch.setattr(cli, "_check", lambda args: 0)
     assert cli.main(["check", "x.ipynb"]) == 0
     assert capsys.readouterr().err.count(note) == 1
+
+
+# -- the class folder and shards, end to end (local backend, public checks only) ----------------
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def class_folder(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path], Path]:
+    """Three submissions graded together into one folder."""
+    import shutil
+
+    from autograder import api
+    from autograder.grading import GradingOptions
+
+    subs = tmp_path_factory.mktemp("subs")
+    for source in (ROOT / "assignments/hull/examples/solution.ipynb",
+                   ROOT / "assignments/hull/examples/wrong-clockwise.ipynb",
+                   ROOT / "tests/files/problems/no-code.ipynb"):
+        shutil.copy(source, subs / source.name)
+    out = tmp_path_factory.mktemp("whole")
+    api.grade("hull", [subs], out=out, jobs=1, options=GradingOptions(public_only=True), progress=False)
+    return sorted(subs.iterdir()), out
+
+
+@pytest.mark.slow
+def test_shards_merged_equal_the_whole_run(class_folder: tuple[list[Path], Path], tmp_path: Path) -> None:
+    from autograder import api
+    from autograder.grading import GradingOptions
+
+    subs, whole = class_folder
+    folders = []
+    for k in range(3):
+        folders.append(tmp_path / f"shard{k}")
+        report = api.grade("hull", subs, out=folders[-1], jobs=1, shard=f"{k}/3",
+                           options=GradingOptions(public_only=True), progress=False)
+        assert report.other_shards == len(subs) - len(report.results)
+    assert sum(len(list(f.glob("*/results.json"))) for f in folders) == len(subs)
+    merged = api.merge(folders, out=tmp_path / "merged", junit=tmp_path / "junit.xml")
+    assert len(merged.results) == len(subs)
+    assert (tmp_path / "merged" / "grades.csv").read_text() == (whole / "grades.csv").read_text()
+    assert (tmp_path / "merged" / "summary.json").read_text() == (whole / "summary.json").read_text()
+    assert all((tmp_path / "merged" / r.id / "feedback.html").is_file() for r in merged.results)
+    assert (tmp_path / "junit.xml").read_text().count("<testsuite ") == len(subs)
+
+
+@pytest.mark.slow
+def test_one_late_file_into_the_class_folder_keeps_every_row(class_folder: tuple[list[Path], Path],
+                                                             tmp_path: Path) -> None:
+    import shutil
+
+    from autograder import api
+    from autograder.grading import GradingOptions
+
+    subs, whole = class_folder
+    out = tmp_path / "class"
+    shutil.copytree(whole, out)
+    late = tmp_path / "submitted" / "alice" / "hull" / "hull.ipynb"
+    late.parent.mkdir(parents=True)
+    shutil.copy(ROOT / "assignments/hull/examples/solution.ipynb", late)
+    previous = os.umask(0o027)
+    try:
+        report = api.grade("hull", [late], out=out, jobs=1, options=GradingOptions(public_only=True),
+                           progress=False, junit=out / "junit.xml")
+    finally:
+        os.umask(previous)
+    assert [r.id for r in report.results] == ["alice"]  # the student's folder names the row
+    rows = (out / "grades.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["alice", "no-code", "solution", "wrong-clockwise"]
+    assert rows[2:] == (whole / "grades.csv").read_text().splitlines()[1:]
+    assert json.loads((out / "summary.json").read_text())["submissions"] == 4
+    assert (out / "junit.xml").read_text().count("<testsuite ") == 4
+    assert stat.S_IMODE((out / "alice" / "results.json").stat().st_mode) == 0o640
+    with pytest.raises(UsageError, match="folder of its own"):
+        api.grade("bezier", [late], out=out, jobs=1, progress=False)

@@ -117,6 +117,8 @@ def test_safe_functions_run_in_the_worker_and_are_still_counted(student: Student
     assert total == pytest.approx(np.sin(np.arange(1000.0)).sum())
     assert f.calls == 1000 and f.evaluations == 1000
     assert np.array_equal(f.points, np.arange(1000.0))
+    # the counts' acknowledgement never gets in the way of the next calls
+    assert student.apply(np.sqrt, 4.0) == 2.0 and student.apply(np.sqrt, 9.0) == 3.0
     with pytest.raises(UsageError, match="cannot be evaluated inside the worker"):
         traced(lambda x: x, safe=True)
 
@@ -192,3 +194,13 @@ def test_evaluation_points_of_vectorised_calls(student: Student) -> None:
     assert f.calls == 1 and np.array_equal(f.points, xs)
     f.reset()
     assert f.calls == 0 and f.points.size == 0
+
+
+def test_a_bug_in_the_checks_function_is_the_checks_error_not_the_students(
+        student: Student) -> None:
+    def buggy(x):
+        return undefined_name * x  # type: ignore[name-defined]  # noqa: F821
+
+    with pytest.raises(NameError):
+        student.apply(buggy, 1.0)
+    assert student.apply(np.exp, 0.0) == 1.0

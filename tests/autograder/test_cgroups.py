@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import ctypes
 import os
+import shutil
 import signal
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,7 +21,7 @@ import pytest
 
 from autograder import cgroups
 from autograder.sandbox import IsolationPolicy, enter_sandbox, probe_support
-from autograder.session import _descendants, kill_descendants, kill_user, slot_lock_dir
+from autograder.session import _descendants, claim_slot, kill_descendants, kill_user, slot_lock_dir
 
 SLOT = 9  # tests never claim slots: use one the quick tests do not use
 HYDRA_UID = 61990
@@ -224,3 +226,54 @@ def test_slot_lock_folder_is_per_user_except_root() -> None:
         assert folder == Path("/run/autograder-slots")
     else:
         assert folder.name == f"autograder-slots-{os.geteuid()}"
+
+
+def claim_as(uid: int | None) -> str:
+    """claim_slot() in a forked child, as ``uid`` (None: as this process); its answer."""
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            if uid is not None:
+                os.setgroups([])
+                os.setresgid(uid, uid, uid)
+                os.setresuid(uid, uid, uid)
+            slot, fd = claim_slot()
+            os.write(write_fd, f"slot {slot} in {slot_lock_dir()}".encode())
+            os.close(fd)
+        except BaseException as exc:
+            os.write(write_fd, f"{type(exc).__name__}: {exc}".encode())
+        finally:
+            os._exit(0)
+    os.close(write_fd)
+    with os.fdopen(read_fd, "rb") as pipe:
+        answer = pipe.read().decode()
+    os.waitpid(pid, 0)
+    return answer
+
+
+@pytest.mark.parametrize("order", [("root", "user"), ("user", "root")])
+def test_root_and_ordinary_users_claim_slots_in_any_order(order: tuple[str, str]) -> None:
+    require_root("switching between root and an ordinary user")
+    uid = 62001
+    answers = [claim_as(None if who == "root" else uid) for who in order]
+    for who, answer in zip(order, answers):
+        assert answer.startswith("slot "), f"{who} could not claim a slot: {answer}"
+    assert any("/run/autograder-slots" in a for a in answers)
+    assert any(f"autograder-slots-{uid}" in a for a in answers)
+
+
+def test_a_lock_folder_planted_by_another_user_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    require_root("planting a folder as another user")
+    uid = 62002
+    shared = Path(tempfile.mkdtemp(dir="/tmp"))  # pytest's own tmp_path is mode 700
+    shared.chmod(0o1777)
+    monkeypatch.setattr(tempfile, "tempdir", str(shared))
+    planted = shared / f"autograder-slots-{uid}"
+    planted.mkdir()
+    planted.chmod(0o777)  # owned by root, open to all: not the grader's own
+    try:
+        answer = claim_as(uid)
+    finally:
+        shutil.rmtree(shared, ignore_errors=True)
+    assert answer.startswith("AutograderError") and "not a private folder" in answer, answer

@@ -2,25 +2,35 @@
 
 The notebooks live in ``tests/files/problems/`` (written by
 ``tests/files/make_problems.py``), each with the outcome it must get in
-``expected.toml``. One batch grades them all, in a subprocess, as a person would.
+``expected.toml``. One batch grades them all, in a subprocess, as a person would:
+once as root and once as an ordinary user with Debian's Python in a venv of its own
+(created by ``tests/support/envs.py``; skipped with the reason where that is not
+possible). After each batch, nothing may have escaped: no listener (TCP and UDP on
+loopback, UNIX pathname, datagram and abstract sockets) received anything, no System
+V IPC object or keyring key of a submission is left, no submission process survives,
+and no file was written outside the work directories.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import pwd
 import re
+import select
+import shutil
 import socket
 import subprocess
 import sys
 import threading
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
 
 import nbformat
 import pytest
 
-from autograder.sandbox import probe_support
+from tests.support import envs
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBLEMS = ROOT / "tests" / "files" / "problems"
@@ -31,46 +41,122 @@ ESCAPE_FILES = [Path("/tmp/autograder-escaped"), Path.home() / "autograder-escap
                 Path("/work/autograder-escaped"), Path("/autograder-escaped"),
                 Path("/tmp/results.json")]
 PORTS = range(47000, 47020)
+#: where the problem notebooks try to reach a listener (see tests/files/make_problems.py)
+UNIX_LISTENER = Path("/tmp/autograder-listener.sock")
+ABSTRACT_LISTENER = "\0autograder-listener"
+#: System V key and process name used by the ipc-* and hydra notebooks
+IPC_KEY = 0x6E67_7261
+HYDRA_NAME = "ag-hydra"
+SLOT_UIDS = range(61000, 62000)
+IDENTITIES = ["root", "user"] if os.geteuid() == 0 else ["self"]
 
 pytestmark = pytest.mark.slow
 
 
 class Listeners:
-    """TCP listeners on loopback that record any connection a submission makes."""
+    """Listeners that record anything a submission sends: TCP and UDP on loopback,
+    UNIX stream and datagram sockets on a file any user may connect to, and an
+    abstract UNIX socket."""
 
     def __init__(self) -> None:
         self.sockets: list[socket.socket] = []
-        self.accepted: list[int] = []
+        self.accepted: list[str] = []
         for port in PORTS:
-            sock = socket.socket()
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                sock.bind(("127.0.0.1", port))
-            except OSError:
-                sock.close()
-                continue
-            sock.listen()
-            sock.settimeout(0.2)
-            self.sockets.append(sock)
+            for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
+                self._add(socket.AF_INET, kind, ("127.0.0.1", port))
+        for path, kind in ((UNIX_LISTENER, socket.SOCK_STREAM),
+                           (Path(f"{UNIX_LISTENER}.dgram"), socket.SOCK_DGRAM)):
+            path.unlink(missing_ok=True)
+            if self._add(socket.AF_UNIX, kind, str(path)):
+                path.chmod(0o777)
+        self._add(socket.AF_UNIX, socket.SOCK_STREAM, ABSTRACT_LISTENER)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._accept, daemon=True)
         self._thread.start()
 
+    def _add(self, family: int, kind: int, address: object) -> bool:
+        sock = socket.socket(family, kind)
+        if family == socket.AF_INET:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(address)
+            if kind == socket.SOCK_STREAM:
+                sock.listen()
+        except OSError:
+            sock.close()
+            return False
+        sock.setblocking(False)
+        self.sockets.append(sock)
+        return True
+
     def _accept(self) -> None:
         while not self._stop.is_set():
-            for sock in self.sockets:
+            readable, _, _ = select.select(self.sockets, [], [], 0.2)
+            for sock in readable:
                 try:
-                    conn, _ = sock.accept()
+                    if sock.type == socket.SOCK_STREAM:
+                        conn, _ = sock.accept()
+                        conn.close()
+                    else:
+                        sock.recv(65536)
                 except OSError:
                     continue
-                self.accepted.append(sock.getsockname()[1])
-                conn.close()
+                self.accepted.append(repr(sock.getsockname()))
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5)
         for sock in self.sockets:
             sock.close()
+        for path in (UNIX_LISTENER, Path(f"{UNIX_LISTENER}.dgram")):
+            path.unlink(missing_ok=True)
+
+
+def sysv_keys() -> set[int]:
+    """Keys of every System V object in the grader's IPC namespace."""
+    keys = set()
+    for kind in ("shm", "msg", "sem"):
+        for line in Path(f"/proc/sysvipc/{kind}").read_text().splitlines()[1:]:
+            keys.add(int(line.split()[0]))
+    return keys
+
+
+def key_users() -> dict[int, int]:
+    """Keys held per user id, from /proc/key-users (all users when read as root)."""
+    counts = {}
+    for line in Path("/proc/key-users").read_text().splitlines():
+        uid, rest = line.split(":", 1)
+        counts[int(uid)] = int(rest.split()[1].split("/")[0])
+    return counts
+
+
+def processes_named(name: str) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if (entry / "comm").read_text().strip() == name:
+                    found.append(int(entry.name))
+            except OSError:
+                continue
+    return found
+
+
+@pytest.fixture(scope="module")
+def user_env() -> Iterator[envs.Env]:
+    """Debian's Python in a venv of an ordinary user, numgrade installed non-editable."""
+    why = envs.can_switch_users()
+    if why is not None:
+        pytest.skip(f"the ordinary-user batch cannot run: {why}")
+    if not Path("/usr/bin/python3").exists():
+        pytest.skip("the ordinary-user batch needs Debian's /usr/bin/python3")
+    user = envs.ordinary_user()
+    top = envs.shared_tempdir("numgrade-problems-")
+    source = envs.copy_repository(top / "src")
+    env = envs.make_venv(top / "venv", install=[str(source)], python="/usr/bin/python3",
+                         user=user)
+    yield env
+    shutil.rmtree(top, ignore_errors=True)
 
 
 def huge_outputs_notebook(folder: Path) -> Path:
@@ -84,24 +170,42 @@ def huge_outputs_notebook(folder: Path) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def batch(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+@pytest.fixture(scope="module", params=IDENTITIES)
+def batch(request: pytest.FixtureRequest,
+          tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    identity = request.param
+    env_user = request.getfixturevalue("user_env") if identity == "user" else None
     for path in ESCAPE_FILES:
         path.unlink(missing_ok=True)
-    extra = tmp_path_factory.mktemp("extra")
+    top = envs.shared_tempdir(f"numgrade-batch-{identity}-")
+    request.addfinalizer(lambda: shutil.rmtree(top, ignore_errors=True))
+    extra, out, tmp = top / "extra", top / "results", top / "tmp"
+    for folder in (extra, out, tmp):
+        folder.mkdir()
+        if env_user is not None:
+            shutil.chown(folder, env_user.user, env_user.user)
     huge = huge_outputs_notebook(extra)
-    out = tmp_path_factory.mktemp("results")
-    listeners = Listeners()
-    env = dict(os.environ, SECRET_TOKEN=SECRET)
+    os.chmod(huge, 0o644)
+
+    def grade(*paths: Path) -> subprocess.CompletedProcess[str]:
+        args = ["-m", "autograder", "grade", str(HULL), *map(str, paths), "--out", str(out),
+                "--jobs", "2", "--timeout", "8", "--call-timeout", "4", "--no-progress"]
+        # TMPDIR of its own: the work directories must all be gone afterwards.
+        env = dict(os.environ, SECRET_TOKEN=SECRET, TMPDIR=str(tmp))
+        if env_user is None:
+            return subprocess.run([sys.executable, *args], capture_output=True, text=True,
+                                  env=env, timeout=900, cwd=extra)
+        return env_user.run("python", *args, cwd=extra, timeout=1800,
+                            env={"SECRET_TOKEN": SECRET, "TMPDIR": str(tmp)})
+
+    keys_before, listeners = key_users(), Listeners()
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "autograder", "grade", str(HULL), str(PROBLEMS), str(huge),
-             "--out", str(out), "--jobs", "2", "--timeout", "8", "--call-timeout", "4",
-             "--no-progress"],
-            capture_output=True, text=True, env=env, timeout=900, cwd=extra)
+        proc = grade(PROBLEMS, huge)
     finally:
         listeners.close()
-    return {"out": out, "proc": proc, "accepted": listeners.accepted}
+    return {"out": out, "proc": proc, "accepted": listeners.accepted, "identity": identity,
+            "grade": grade, "tmp": tmp, "keys_before": keys_before,
+            "uid": None if env_user is None else pwd.getpwnam(env_user.user).pw_uid}
 
 
 def load(batch: dict[str, object], name: str) -> dict[str, object]:
@@ -164,6 +268,7 @@ def test_no_file_escaped(batch: dict[str, object]) -> None:
 
 
 def test_no_connection_reached_a_listener(batch: dict[str, object]) -> None:
+    # TCP and UDP on loopback, UNIX pathname (stream, datagram) and abstract sockets
     assert batch["accepted"] == []
 
 
@@ -189,8 +294,10 @@ def test_no_secret_in_results(batch: dict[str, object]) -> None:
 
 
 def test_no_student_process_survives(batch: dict[str, object]) -> None:
-    if not probe_support().is_root:
-        pytest.skip("runs as a dedicated unprivileged user only when the grader is root")
+    # The hydra notebook re-forks itself in new sessions faster than a sweep of /proc.
+    assert processes_named(HYDRA_NAME) == []
+    if batch["identity"] != "root":
+        return  # the ordinary user's own processes include unrelated ones: the name suffices
     out = batch["out"]
     assert isinstance(out, Path)
     uids = set()  # the users this batch's workers ran as, from the notes of each result
@@ -213,14 +320,35 @@ def test_no_student_process_survives(batch: dict[str, object]) -> None:
     assert survivors == []
 
 
+def test_no_ipc_object_or_key_is_left(batch: dict[str, object]) -> None:
+    assert IPC_KEY not in sysv_keys(), "a System V object of ipc-a-leave outlived it"
+    before, after = batch["keys_before"], key_users()
+    assert isinstance(before, dict)
+    grew = {uid: n for uid, n in after.items()
+            if (uid in SLOT_UIDS or uid == batch["uid"]) and n > before.get(uid, 0)}
+    assert grew == {}, f"keyring keys left by submissions (uid: keys): {grew}"
+
+
+def test_no_work_directory_is_left(batch: dict[str, object]) -> None:
+    tmp = batch["tmp"]
+    assert isinstance(tmp, Path)
+    left = sorted(p.name for p in tmp.iterdir() if not p.name.startswith("autograder-slots"))
+    assert left == []
+
+
+def test_nothing_was_taken_from_another_submission(batch: dict[str, object]) -> None:
+    result = load(batch, "ipc-b-take")
+    assert "took the solution" not in result["extra_data"]["stdout"]
+    assert result["score"] == 0
+
+
 def test_regrading_reuses_every_result(batch: dict[str, object]) -> None:
     out = batch["out"]
     assert isinstance(out, Path)
     before = {p: p.read_text() for p in out.rglob("results.json")}
-    proc = subprocess.run(
-        [sys.executable, "-m", "autograder", "grade", str(HULL), str(PROBLEMS),
-         "--out", str(out), "--jobs", "2", "--timeout", "8", "--call-timeout", "4", "--no-progress"],
-        capture_output=True, text=True, timeout=300)
+    grade = batch["grade"]
+    assert callable(grade)
+    proc = grade(PROBLEMS)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert f"reused {len(EXPECTED)}" in proc.stdout
     assert all(p.read_text() == text for p, text in before.items() if p.parent.name in EXPECTED)

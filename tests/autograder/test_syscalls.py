@@ -334,3 +334,79 @@ def test_private_namespaces_report_what_they_did(workdir: Path, identity: str) -
 
 def test_user_namespaces_allowed_is_a_bool() -> None:
     assert isinstance(syscalls.user_namespaces_allowed(), bool)
+
+
+# ---------------------------------------------------------------- process group
+
+def test_process_group_cannot_be_left(workdir: Path, identity: str) -> None:
+    def action() -> list[int]:
+        codes = []
+        for call in (os.setsid, lambda: os.setpgid(0, 0)):
+            try:
+                call()
+                codes.append(0)
+            except OSError as exc:
+                codes.append(exc.errno or 0)
+        return codes
+
+    assert run(action, workdir, identity)["value"] == [errno.EPERM, errno.EPERM]
+
+
+def test_killing_the_group_ends_a_process_that_reforks(workdir: Path, identity: str) -> None:
+    """A chain of processes that each fork and exit stays in the group: one killpg ends it."""
+    name = b"ag-test-hydra"
+    readable_paths([])  # imports what enter_sandbox needs while this user can read them
+    libc = ctypes.CDLL(None)
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            os.close(read_fd)
+            if identity == "user" and os.geteuid() == 0:
+                os.setgroups([])
+                os.setresgid(ORDINARY_UID, ORDINARY_UID, ORDINARY_UID)
+                os.setresuid(ORDINARY_UID, ORDINARY_UID, ORDINARY_UID)
+            enter_sandbox(IsolationPolicy(), workdir, slot=7)
+            os.write(write_fd, b"in")
+            while True:
+                try:
+                    if os.fork():
+                        os._exit(0)
+                except OSError:
+                    continue
+                try:
+                    os.setsid()
+                except OSError:
+                    pass
+                libc.prctl(15, name, 0, 0, 0)  # PR_SET_NAME
+        except BaseException as exc:
+            os.write(write_fd, repr(exc).encode())
+        finally:
+            os._exit(0)
+    os.close(write_fd)
+    try:
+        assert os.read(read_fd, 200) == b"in"
+        os.waitpid(pid, 0)  # the first generation exits at once
+        time.sleep(0.3)
+        assert hydra_processes(name), "the chain should be running"
+        os.killpg(pid, signal.SIGKILL)
+        time.sleep(0.3)
+        assert hydra_processes(name) == []
+    finally:
+        os.close(read_fd)
+        for found in hydra_processes(name):
+            os.kill(found, signal.SIGKILL)
+
+
+def hydra_processes(name: bytes) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                status = (entry / "stat").read_bytes()
+            except OSError:
+                continue
+            comm, state = status.split(b"(", 1)[1].rsplit(b")", 1)
+            if comm == name and state.split()[0] != b"Z":
+                found.append(int(entry.name))
+    return found

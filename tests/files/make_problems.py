@@ -176,6 +176,136 @@ PROBLEMS: dict[str, tuple[object, dict[str, object]]] = {
                      {"score": "partial", "outcome": "graded"}),
 }
 
+# Kernel objects and resources a submission must not keep or share (issue 9). The
+# "leave" notebooks try to pass the solution on; the "take" notebooks, with no code
+# of their own, look for it. Names sort so that a leaver usually runs before a taker.
+IPC_KEY = 0x6E67_7261  # also in tests/autograder/test_problems.py
+IPC_LEAVE = f'''
+import ctypes, os
+libc = ctypes.CDLL(None, use_errno=True)
+code = {SOLUTION!r}.encode()
+left = []
+shm = libc.shmget({IPC_KEY}, 1 << 16, 0o1666)
+if shm != -1:
+    libc.shmat.restype = ctypes.c_void_p
+    address = libc.shmat(shm, None, 0)
+    if address not in (None, ctypes.c_void_p(-1).value):
+        ctypes.memmove(address, code + b"\\0", len(code) + 1)
+        left.append("shm")
+if libc.msgget({IPC_KEY}, 0o1666) != -1:
+    left.append("msg")
+if libc.semget({IPC_KEY}, 1, 0o1666) != -1:
+    left.append("sem")
+key = libc.syscall(248, b"user\\0", b"numgrade-answers\\0", code, len(code), -4)  # add_key into the user keyring (x86-64)
+if key != -1:
+    left.append("keyring")
+print("left behind:", left, "errno", ctypes.get_errno())
+'''
+IPC_TAKE = f'''
+import ctypes
+libc = ctypes.CDLL(None, use_errno=True)
+shm = libc.shmget({IPC_KEY}, 0, 0)
+if shm != -1:
+    libc.shmat.restype = ctypes.c_void_p
+    address = libc.shmat(shm, None, 0)
+    exec(ctypes.string_at(address).decode())
+    print("took the solution from System V shared memory")
+serial = libc.syscall(250, 10, -4, b"user\\0", b"numgrade-answers\\0", 0)  # keyctl(KEYCTL_SEARCH), x86-64 numbers
+if serial != -1 and "convex_hull" not in globals():
+    buffer = ctypes.create_string_buffer(1 << 16)
+    size = libc.syscall(250, 11, serial, buffer, len(buffer))  # KEYCTL_READ
+    exec(buffer.raw[:size].decode())
+    print("took the solution from the keyring")
+'''
+LISTENER_SOCKET = "/tmp/autograder-listener.sock"  # also in tests/autograder/test_problems.py
+SOCKET_FAMILIES = f'''
+import socket
+tries = {{
+    "unix-path": lambda: (socket.AF_UNIX, socket.SOCK_STREAM, 0, {LISTENER_SOCKET!r}),
+    "unix-abstract": lambda: (socket.AF_UNIX, socket.SOCK_STREAM, 0, "\\0autograder-listener"),
+    "unix-dgram": lambda: (socket.AF_UNIX, socket.SOCK_DGRAM, 0, {LISTENER_SOCKET!r} + ".dgram"),
+    "udp": lambda: (socket.AF_INET, socket.SOCK_DGRAM, 0, ("127.0.0.1", 47000)),
+    "mptcp": lambda: (socket.AF_INET, socket.SOCK_STREAM, 262, ("127.0.0.1", 47001)),
+    "tcp6": lambda: (socket.AF_INET6, socket.SOCK_STREAM, 0, ("::1", 47002)),
+    "ping": lambda: (socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_ICMP, ("127.0.0.1", 0)),
+    "raw": lambda: (socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_ICMP, ("127.0.0.1", 0)),
+    "netlink": lambda: (socket.AF_NETLINK, socket.SOCK_RAW, 0, (0, 0)),
+}}
+for name, spec in tries.items():
+    family, kind, proto, address = spec()
+    try:
+        s = socket.socket(family, kind, proto)
+        s.settimeout(0.5)
+        s.connect(address)
+        s.send(b"escaped: " + name.encode())
+        print("reached", name)
+    except OSError as e:
+        print("blocked", name, e)
+a, b = None, None
+try:
+    a, b = socket.socketpair()
+    print("socketpair made")
+except OSError as e:
+    print("blocked socketpair", e)
+'''
+MEMFD_HOARD = '''
+import os
+held = []
+try:
+    for _ in range(16):
+        fd = os.memfd_create("hoard")
+        os.ftruncate(fd, 1 << 28)
+        os.write(fd, b"x" * (1 << 20))
+        held.append(fd)
+except OSError as e:
+    print("memfd refused after", len(held), e)
+'''
+DISK_FILL = '''
+import os, signal
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+written = 0
+try:
+    for i in range(64):
+        with open(f"fill-{i}.bin", "wb") as fh:
+            for _ in range(32):
+                written += fh.write(b"\\0" * (1 << 20))
+except OSError as e:
+    print("stopped after", written >> 20, "MiB:", e)
+for name in os.listdir("."):
+    if name.startswith("fill-"):
+        os.remove(name)
+'''
+HYDRA = '''
+import ctypes, os, time
+def hydra():
+    libc = ctypes.CDLL(None)
+    while True:
+        time.sleep(0.02)  # re-forks all the time, but leaves the CPU to the graded calls
+        try:
+            pid = os.fork()
+        except OSError:
+            continue
+        if pid:
+            os._exit(0)
+        try:
+            os.setsid()  # out of the process group that the grader kills
+        except OSError:
+            pass
+        libc.prctl(15, b"ag-hydra", 0, 0, 0)  # PR_SET_NAME: the test looks for it
+if os.fork() == 0:
+    hydra()
+'''
+
+PROBLEMS.update({
+    "ipc-a-leave": (nb(IPC_LEAVE, SOLUTION), {"score": "1", "outcome": "graded", "escape": "ipc"}),
+    "ipc-b-take": (nb(IPC_TAKE), {"score": "0", "outcome": "graded", "escape": "ipc"}),
+    "socket-families": (nb(SOCKET_FAMILIES, SOLUTION),
+                        {"score": "1", "outcome": "graded", "escape": "network"}),
+    "memfd-hoard": (nb(MEMFD_HOARD, SOLUTION), {"score": "1", "outcome": "graded"}),
+    "disk-fill": (nb(DISK_FILL, SOLUTION), {"score": "1", "outcome": "graded", "escape": "files"}),
+    "hydra": (nb(HYDRA, SOLUTION), {"score": "1", "outcome": "graded", "escape": "processes"}),
+})
+
 FILES = {
     "not-json.ipynb": b'{"cells": [ this is not json',
     "binary.ipynb": bytes(range(256)) * 8,

@@ -193,7 +193,7 @@ COMPLEX_CALLS = {
 @pytest.mark.parametrize("case", sorted(COMPLEX_CALLS))
 def test_complex_input_is_refused_not_truncated(case):
     call, name = COMPLEX_CALLS[case]
-    with pytest.raises(TypeError, match=rf"{name} must hold real numbers"):
+    with pytest.raises(ValueError, match=rf"{name} must contain real values"):
         call()
 
 
@@ -211,7 +211,7 @@ MASKED_CALLS = {
 def test_masked_arrays_are_refused(case):
     call, name = MASKED_CALLS[case]
     mask = np.array([[False, False], [False, False], [False, False], [True, True]])
-    with pytest.raises(TypeError, match=rf"{name} must be a plain array, not a masked array"):
+    with pytest.raises(ValueError, match=rf"{name} must be a plain array, not a masked array"):
         call(mask)
 
 
@@ -352,8 +352,8 @@ def test_node_hits_and_inside_points_unchanged():
     assert np.array_equal(barycentric_interpolate(x, y, x), y)
     t = np.linspace(-1, 1, 11)
     w = barycentric_weights(x)
-    q = w / (t[:, None] - x)
     with np.errstate(divide="ignore", invalid="ignore"):
+        q = w / (t[:, None] - x)
         second = (q @ y) / q.sum(axis=1)
     inside = ~np.isin(t, x)
     np.testing.assert_allclose(barycentric_interpolate(x, y, t)[inside], second[inside], rtol=1e-15)

@@ -9,18 +9,20 @@ skip, saying why, only where PostgreSQL is not installed).
 from __future__ import annotations
 
 import datetime as dt
+import shutil
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Callable
 
 import pytest
-from sqlalchemy import create_engine
-from sqlalchemy.engine import Engine
 
-import svc_support as support
+pytest.importorskip("fastapi", reason="the service extra is not installed: pip install -e '.[service,postgres]'")
 
-pytest.importorskip("fastapi", reason="the service extra is not installed: pip install -e '.[service]'")
+from sqlalchemy import create_engine  # noqa: E402
+from sqlalchemy.engine import Engine  # noqa: E402
+
+import svc_support as support  # noqa: E402
 
 STAFF = [("tess", "Tess TA", "tess@example.edu", "ta"),
          ("prof", "Prof Ada", "ada@example.edu", "instructor")]
@@ -39,9 +41,9 @@ def iso(when: dt.datetime) -> str:
 
 
 @pytest.fixture(scope="session")
-def postgres(tmp_path_factory: pytest.TempPathFactory) -> Iterator[support.PostgresCluster]:
+def postgres() -> Iterator[support.PostgresCluster]:
     try:
-        cluster = support.start_postgres(tmp_path_factory.mktemp("postgres"))
+        cluster = support.start_postgres()
     except RuntimeError as exc:
         pytest.skip(f"PostgreSQL runs skipped: {exc}")
     try:
@@ -92,11 +94,22 @@ opens = 2020-01-01T00:00:00Z
 deadline = 2020-02-01T00:00:00Z
 
 [[assignment]]
+name = "broken"
+assignment = "./broken-hull"
+opens = 2020-01-01T00:00:00Z
+deadline = 2099-02-01T00:00:00Z
+
+[[assignment]]
 name = "later"
 assignment = "hull"
 opens = 2099-01-01T00:00:00Z
 deadline = 2099-02-01T00:00:00Z
 """
+    broken = folder / "broken-hull"  # hull with a hidden check that cannot be collected
+    shutil.copytree(support.ROOT / "assignments" / "hull", broken)
+    for check in (broken / "checks" / "hidden").glob("test_*.py"):
+        check.rename(check.with_suffix(".ok"))
+        check.write_text("def broken(:\n")
     return support.write_course(folder, body=body, roster=CLASS)
 
 
@@ -107,7 +120,7 @@ class Running:
         self.server = server
         self.url = server.url
         self.tokens = server.tokens()
-        self.engine: Engine = create_engine(server.database.replace("postgresql+psycopg", "postgresql+psycopg"))
+        self.engine: Engine = create_engine(server.database)
         self.data = server.course.parent / "data"
 
 

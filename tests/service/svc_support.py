@@ -17,6 +17,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.error
 import urllib.request
@@ -81,6 +82,7 @@ class PostgresCluster:
     def stop(self) -> None:
         self._run("pg_ctl", "-D", str(self.folder / "data"), "-m", "immediate", "-w", "stop",
                   check=False)
+        shutil.rmtree(self.folder, ignore_errors=True)
 
     def create_database(self, name: str) -> str:
         import psycopg
@@ -91,8 +93,8 @@ class PostgresCluster:
         return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{name}"
 
 
-def start_postgres(tmp: Path) -> PostgresCluster:
-    """Start a cluster; raise ``RuntimeError`` saying why when it cannot."""
+def start_postgres() -> PostgresCluster:
+    """Start a cluster; ``RuntimeError`` (skip) only when PostgreSQL is not installed."""
     binary = postgres_bin()
     if binary is None:
         raise RuntimeError("PostgreSQL is not installed (apt-get install postgresql; .ci/run does)")
@@ -104,16 +106,17 @@ def start_postgres(tmp: Path) -> PostgresCluster:
             raise RuntimeError("running as root and there is no 'postgres' user to run the "
                                "cluster as (Debian's postgresql package creates it)") from None
         user = "postgres"
-    folder = tmp / "pg"
-    folder.mkdir()
-    os.chmod(tmp, 0o755)
+    # pytest's temporary folders are private to root: the cluster's user could not reach
+    # one, so the cluster lives in a folder of its own under the system's temporary folder
+    folder = Path(tempfile.mkdtemp(prefix="numgrade-pg-"))
     if user is not None:
         shutil.chown(folder, user, user)
     cluster = PostgresCluster(folder, free_port(), user, binary)
     try:
         cluster.start()
     except subprocess.CalledProcessError as exc:
-        raise RuntimeError(f"the PostgreSQL cluster did not start: {exc.stderr[-500:]}") from None
+        shutil.rmtree(folder, ignore_errors=True)  # installed but broken: a failure, not a skip
+        raise AssertionError(f"the PostgreSQL cluster did not start: {exc.stderr[-1500:]}") from None
     return cluster
 
 

@@ -18,6 +18,7 @@ from autograder.checks import CheckFailure, Credit, plural, show_number
 #: two points count as the same node within this distance (nodes are computed
 #: in double precision in different ways: -cos(j pi / n) and sin(...) differ by ~1e-16)
 SAME_NODE = 1e-12
+_LABEL = {"chebyshev": "Chebyshev", "equispaced": "equispaced"}
 #: the point grid of the notebook's `GRID`
 GRID = np.linspace(-1.0, 1.0, 1001)
 
@@ -54,12 +55,12 @@ def expect_sampled_at_nodes(f: Traced, n: int, kind: str, credit: Credit, *, wha
     other = "equispaced" if kind == "chebyshev" else "chebyshev"
     if off.size and not _off(points, nodes(n, other)).size:
         raise CheckFailure(
-            f"{what} evaluated f at the {other} nodes, but nodes={kind!r} asks for the "
-            f"{kind} nodes: pass the kind on to interpolation_nodes.")
+            f"{what} evaluated f at the {_LABEL[other]} nodes, but nodes={kind!r} asks for "
+            f"the {_LABEL[kind]} nodes: pass the kind on to interpolation_nodes.")
     if off.size:
         raise CheckFailure(
             f"{what} evaluated f at {plural(off.size, 'point')} that are not among the "
-            f"n + 1 = {n + 1} {kind} nodes (for example at x = {show_number(off[0])}). "
+            f"n + 1 = {n + 1} {_LABEL[kind]} nodes (for example at x = {show_number(off[0])}). "
             "An interpolant may use f only at its nodes: sample f(x) once at the nodes "
             "and compute everything else from those values.")
     missing = _off(x, points)

@@ -187,6 +187,24 @@ def _order(coarse, fine):
     return math.log2(coarse / fine) if coarse > 0 else -math.inf
 
 
+#: A spline "looks like piecewise linear interpolation" only when it is within this
+#: fraction of the gap between the true spline and the broken line through the same points.
+LINEAR_LIKENESS = 0.1
+
+
+def _looks_like(f, x, reading, margin, order) -> str:
+    """A hint naming what the spline resembles, only when that is measured in its values."""
+    t = np.linspace(x[0] + margin, x[-1] - margin, 20 * (len(x) - 1) + 1)
+    mine = evaluate(reading.rows, x, t)
+    linear = np.interp(t, x, f(x))
+    gap = float(np.max(np.abs(evaluate(expected_rows(x, f(x)), x, t) - linear)))
+    if gap > 0 and float(np.max(np.abs(mine - linear))) <= LINEAR_LIKENESS * gap:
+        return ", which looks like piecewise linear interpolation (order 2)"
+    if order < 1.5:
+        return ", order 1 or worse: the pieces are not the cubic spline's (check the solve)"
+    return ""
+
+
 @pytest.mark.points(2)
 @pytest.mark.parametrize("name", list(FUNCTIONS))
 def test_convergence(student, credit, name):
@@ -200,13 +218,12 @@ def test_convergence(student, credit, name):
              "the ends, where a natural spline is only O(h^2) accurate)")
     order = _order(e_coarse, e_fine)
     if not order >= INTERIOR_ORDER:
-        looks = ("like piecewise linear interpolation (order 2)" if order > 1.5 else
-                 "like order 1 or worse")
+        looks = _looks_like(f, x_fine, reading, margin, order)
         raise CheckFailure(
             f"Interpolating f = {name} at {COARSE + 1} and then {2 * COARSE + 1} equally spaced "
             f"points, your spline's maximum error {where} went from {e_coarse:.2e} to "
             f"{e_fine:.2e}: halving the spacing h divided it by {e_coarse / e_fine:.1f}, order "
-            f"{order:.1f}, which looks {looks}. A cubic spline's error there shrinks like h^4: "
+            f"{order:.1f}{looks}. A cubic spline's error there shrinks like h^4: "
             "the ratio should be about 16.")
     if not e_fine <= FINE_ERROR:
         raise CheckFailure(
@@ -359,4 +376,4 @@ def test_draw_car_unseen(student, credit, feedback, rng, name):
     build, what, _ = SHAPES[name]
     strokes = build(rng)
     fig = student.draw_car(strokes)
-    judge.grade_drawing(fig, strokes, credit, feedback, what=what)
+    judge.grade_drawing(fig, strokes, credit, feedback, what=what, picture_shown=False)

@@ -1,0 +1,284 @@
+"""The Dask backend, end to end on one machine: same grades as the local pool,
+workers dying mid-grade, reruns, late workers, TLS, and the scheduler out of
+students' reach.
+
+Every cluster here is a ``LocalCluster`` of at most two worker processes on
+loopback; the checks run public-only to keep the tests short.
+"""
+
+from __future__ import annotations
+
+import datetime
+import shutil
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import nbformat
+import pytest
+
+distributed = pytest.importorskip("distributed", reason="the Dask backend needs `pip install numgrade[dask]`")
+
+import cloudpickle  # noqa: E402  (installed with distributed)
+import dask  # noqa: E402
+
+import dask_test_plugins  # noqa: E402
+from autograder import api  # noqa: E402
+from autograder.backends import DaskSpec, TLSFiles  # noqa: E402
+from autograder.backends.dask_cluster import RESOURCE, local_cluster  # noqa: E402
+from autograder.errors import UsageError  # noqa: E402
+from autograder.grading import GradingOptions  # noqa: E402
+from autograder.report import read_result  # noqa: E402
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "assignments" / "hull" / "examples"
+PROBLEMS = ROOT / "tests" / "files" / "problems"
+OPTIONS = GradingOptions(public_only=True)
+
+cloudpickle.register_pickle_by_value(dask_test_plugins)
+
+
+def _notebook(path: Path, *cells: str) -> Path:
+    """The problem folder's solution with ``cells`` run first."""
+    nb = nbformat.read(PROBLEMS / "solution.ipynb", as_version=4)
+    nb.cells[0:0] = [nbformat.v4.new_code_cell(c) for c in cells]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    nbformat.write(nb, path)
+    return path
+
+
+#: a cell that looks for every listening TCP port it can see (its own namespace's,
+#: and its ancestors', i.e. the Dask worker's and, for local:N, the scheduler's) and
+#: tries to connect to each; it prints what it found and what it reached.
+SCAN = '''
+import os, socket
+ports = set(EXTRA_PORTS)
+def listening(path):
+    try:
+        rows = open(path).read().splitlines()[1:]
+    except OSError:
+        return set()
+    return {int(r.split()[1].rsplit(':', 1)[1], 16) for r in rows if r.split()[3] == '0A'}
+pid = os.getpid()
+for _ in range(8):
+    ports |= listening(f'/proc/{pid}/net/tcp')
+    try:
+        pid = int(open(f'/proc/{pid}/stat').read().rsplit(')', 1)[1].split()[1])
+    except (OSError, ValueError, IndexError):
+        break
+    if pid <= 1:
+        break
+reached = []
+for port in sorted(ports)[:300]:
+    s = socket.socket()
+    s.settimeout(1.0)
+    try:
+        s.connect(('127.0.0.1', port))
+        reached.append(port)
+    except OSError:
+        pass
+    finally:
+        s.close()
+print('SCANNED', sorted(ports), 'REACHED', reached)
+'''
+
+
+def _scan_notebook(path: Path, extra_ports: list[int]) -> Path:
+    return _notebook(path, f"EXTRA_PORTS = {extra_ports!r}\n" + SCAN)
+
+
+def _scan_report(stdout: str) -> tuple[list[int], list[int]]:
+    line = next(l for l in stdout.splitlines() if l.startswith("SCANNED"))
+    scanned, reached = line.removeprefix("SCANNED ").split(" REACHED ")
+    return eval(scanned), eval(reached)  # noqa: S307 (our own notebook's printout of two int lists)
+
+
+@pytest.fixture(scope="module")
+def submissions(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    folder = tmp_path_factory.mktemp("submitted")
+    picked = [EXAMPLES / "solution.ipynb", EXAMPLES / "wrong-clockwise.ipynb",
+              EXAMPLES / "partial-only-orientation.ipynb", PROBLEMS / "cell-raises.ipynb",
+              PROBLEMS / "no-code.ipynb", PROBLEMS / "not-json.ipynb"]
+    for path in picked:
+        shutil.copy(path, folder / path.name)
+    return sorted(folder.iterdir())
+
+
+def test_dask_gives_the_grades_of_the_local_pool(submissions: list[Path], tmp_path: Path) -> None:
+    local = api.grade("hull", submissions, out=tmp_path / "local", jobs=2, options=OPTIONS,
+                      progress=False)
+    remote = api.grade("hull", submissions, out=tmp_path / "dask", dask="local:2", options=OPTIONS,
+                       progress=False)
+    assert not local.failed and not remote.failed
+    assert (tmp_path / "dask" / "grades.csv").read_text() == (tmp_path / "local" / "grades.csv").read_text()
+    assert (tmp_path / "dask" / "summary.json").read_text() == (tmp_path / "local" / "summary.json").read_text()
+    for result in remote.results:  # the client wrote every file, with its own paths and keys
+        assert (tmp_path / "dask" / result.id / "feedback.html").is_file()
+        assert result.source.startswith(str(submissions[0].parent))
+        assert read_result(tmp_path / "dask" / result.id).key == read_result(tmp_path / "local" / result.id).key
+    # the results folder of one backend is reused by the other: same keys
+    again = api.grade("hull", submissions, out=tmp_path / "local", dask="local:2", options=OPTIONS,
+                      progress=False)
+    assert again.graded == 0 and again.reused == len(submissions)
+
+
+def test_dead_workers_cost_no_result_and_reruns_send_only_what_is_missing(tmp_path: Path) -> None:
+    subs = tmp_path / "subs"
+    _notebook(subs / "sleepy.ipynb", "import time\ntime.sleep(4)")
+    _notebook(subs / "doomed.ipynb")
+    shutil.copy(EXAMPLES / "solution.ipynb", subs / "solution.ipynb")
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    out = tmp_path / "out"
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+        cluster = local_cluster(2)
+    with cluster, distributed.Client(cluster) as client:
+        client.register_plugin(dask_test_plugins.KillWhenGrading(marks, once=("sleepy",),
+                                                                  always=("doomed",)))
+        seen: list[str] = []
+        report = api.grade("hull", [subs], out=out, dask=cluster.scheduler_address, options=OPTIONS,
+                           progress=False, on_result=lambda r: seen.append(r.id))
+        assert (marks / "sleepy").exists(), "the worker grading `sleepy` was never killed"
+        assert sorted(seen) == ["doomed", "sleepy", "solution"]  # exactly one result each
+        by_id = {r.id: r for r in report.results}
+        assert by_id["sleepy"].outcome == "graded" and by_id["sleepy"].score == by_id["sleepy"].max_score
+        assert by_id["doomed"].outcome == "error" and "regraded on the next run" in by_id["doomed"].output
+        assert [r.id for r in report.failed] == ["doomed"]
+        assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["doomed", "sleepy", "solution"]
+        assert len(list(out.rglob("results.json"))) == 3
+        assert not list(out.rglob("*.tmp"))
+        assert (out / "grades.csv").read_text().count("\n") == 4
+
+        shutil.rmtree(out / "solution")
+        seen.clear()
+        rerun = api.grade("hull", [subs], out=out, dask=cluster.scheduler_address, options=OPTIONS,
+                          progress=False, on_result=lambda r: seen.append(r.id))
+        assert rerun.reused == 1 and sorted(seen) == ["doomed", "solution"]  # error results are retried
+    code = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", str(subs / "doomed.ipynb"),
+                           "--out", str(tmp_path / "cli"), "--dask", "tcp://127.0.0.1:9", "--no-progress"],
+                          capture_output=True, text=True)
+    assert code.returncode == 2 and "Could not reach the Dask scheduler" in code.stderr
+
+
+def _certificates(folder: Path) -> TLSFiles:
+    """A CA and a certificate for 127.0.0.1 signed by it, made with `cryptography`."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+    import ipaddress
+
+    now = datetime.datetime.now(datetime.timezone.utc)
+    ca_key, key = ec.generate_private_key(ec.SECP256R1()), ec.generate_private_key(ec.SECP256R1())
+    ca_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "numgrade test CA")])
+    ca = (x509.CertificateBuilder().subject_name(ca_name).issuer_name(ca_name)
+          .public_key(ca_key.public_key()).serial_number(x509.random_serial_number())
+          .not_valid_before(now - datetime.timedelta(days=1)).not_valid_after(now + datetime.timedelta(days=2))
+          .add_extension(x509.BasicConstraints(ca=True, path_length=None), critical=True)
+          .sign(ca_key, hashes.SHA256()))
+    cert = (x509.CertificateBuilder()
+            .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "localhost")]))
+            .issuer_name(ca_name).public_key(key.public_key()).serial_number(x509.random_serial_number())
+            .not_valid_before(now - datetime.timedelta(days=1)).not_valid_after(now + datetime.timedelta(days=2))
+            .add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost"),
+                                                        x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]),
+                           critical=False)
+            .sign(ca_key, hashes.SHA256()))
+    pem = serialization.Encoding.PEM
+    (folder / "ca.pem").write_bytes(ca.public_bytes(pem))
+    (folder / "cert.pem").write_bytes(cert.public_bytes(pem))
+    (folder / "key.pem").write_bytes(key.private_bytes(pem, serialization.PrivateFormat.PKCS8,
+                                                       serialization.NoEncryption()))
+    return TLSFiles(ca_file=folder / "ca.pem", cert=folder / "cert.pem", key=folder / "key.pem")
+
+
+def test_tls_cluster_a_late_worker_and_a_scheduler_students_cannot_reach(tmp_path: Path) -> None:
+    pytest.importorskip("cryptography", reason="making test certificates needs `cryptography`")
+    tls = _certificates(tmp_path)
+    security = distributed.security.Security(
+        require_encryption=True, tls_ca_file=str(tls.ca_file),
+        **{f"tls_{role}_{part}": str(getattr(tls, "cert" if part == "cert" else "key"))
+           for role in ("scheduler", "worker", "client") for part in ("cert", "key")})
+    with local_cluster(0, protocol="tls://", security=security) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tls://127.0.0.1:")
+        port = int(address.rsplit(":", 1)[1])
+        notebook = _scan_notebook(tmp_path / "subs" / "scan.ipynb", [port])
+        outcome: dict[str, object] = {}
+
+        def grade() -> None:
+            try:
+                outcome["report"] = api.grade("hull", [notebook], out=tmp_path / "out", options=OPTIONS,
+                                              dask=DaskSpec(address, tls=tls), progress=False)
+            except BaseException as exc:  # reported by the assertion below
+                outcome["error"] = exc
+
+        thread = threading.Thread(target=grade)
+        thread.start()
+        thread.join(timeout=2)  # the batch waits: no worker has a grading slot yet
+        assert thread.is_alive() and not outcome
+        cluster.scale(1)  # a worker joining after the start gets its slot from the plugin
+        thread.join(timeout=800)
+        assert not thread.is_alive() and "error" not in outcome, outcome
+    result = outcome["report"].results[0]  # type: ignore[attr-defined]
+    assert result.outcome == "graded" and result.score == result.max_score
+    scanned, reached = _scan_report(result.stdout)
+    assert port in scanned and reached == []
+
+
+def test_scheduler_of_local_cluster_is_out_of_reach(tmp_path: Path) -> None:
+    notebook = _scan_notebook(tmp_path / "subs" / "scan.ipynb", [])
+    report = api.grade("hull", [notebook], out=tmp_path / "out", dask="local:2", options=OPTIONS,
+                       progress=False)
+    result = report.results[0]
+    assert result.outcome == "graded" and result.score == result.max_score
+    scanned, reached = _scan_report(result.stdout)
+    assert reached == [], f"student code reached ports {reached} (of {scanned})"
+
+
+@pytest.mark.parametrize("address", ["tcp://10.1.2.3:8786", "192.0.2.7:8786", "tcp://[2001:db8::1]:8786"])
+def test_plain_tcp_off_loopback_is_refused_without_insecure(address: str, tmp_path: Path) -> None:
+    with pytest.raises(UsageError, match="pickled"):
+        DaskSpec(address)
+    assert DaskSpec(address, insecure=True).address == address
+    done = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", str(EXAMPLES / "solution.ipynb"),
+                           "--out", str(tmp_path / "out"), "--dask", address],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and "--insecure" in done.stderr and "Traceback" not in done.stderr
+    assert not (tmp_path / "out" / "solution").exists()
+
+
+def test_addresses_on_loopback_and_tls_are_accepted(tmp_path: Path) -> None:
+    assert DaskSpec("tcp://127.0.0.1:8786").local_workers is None
+    assert DaskSpec("local:3").local_workers == 3
+    with pytest.raises(UsageError, match="local:N"):
+        DaskSpec("local:zero")
+    with pytest.raises(UsageError, match="--tls-ca-file"):
+        DaskSpec("tls://grader.example.edu:8786")
+    with pytest.raises(UsageError, match="is not a file"):
+        TLSFiles(ca_file=tmp_path / "missing.pem", cert=tmp_path / "missing.pem")
+
+
+def test_worker_command_serves_grading_slots(tmp_path: Path) -> None:
+    import signal
+
+    with local_cluster(0) as cluster:
+        node = subprocess.Popen([sys.executable, "-m", "autograder", "worker", cluster.scheduler_address,
+                                 "--slots", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            report = api.grade("hull", [EXAMPLES / "solution.ipynb"], out=tmp_path / "out",
+                               dask=cluster.scheduler_address, options=OPTIONS, progress=False)
+            workers = cluster.scheduler.workers.values()
+            assert [w.resources for w in workers] == [{RESOURCE: 1}]
+        finally:
+            node.send_signal(signal.SIGINT)
+            try:
+                node.communicate(timeout=120)
+            except subprocess.TimeoutExpired:
+                node.kill()
+                node.communicate()
+    result = report.results[0]
+    assert result.outcome == "graded" and result.score == result.max_score
