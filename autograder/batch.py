@@ -273,6 +273,9 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
     ``shard`` keeps only the submissions of that shard.
     """
     start = time.perf_counter()
+    if dask is not None and jobs is not None:
+        raise UsageError("--jobs sets the local pool's size; with --dask the cluster's grading "
+                         "slots set how many run at once (local:N, or `autograder worker --slots N`).")
     options = options or GradingOptions()
     paths = collect_submissions(submissions)
     ids = assign_ids(paths)

@@ -39,7 +39,8 @@ import numpy as np
 from autograder import protocol
 from autograder.errors import AutograderError, UsageError
 
-__all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "Traced", "traced", "CallbackRegistry"]
+__all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "CallRecord", "Traced", "traced",
+           "CallbackRegistry", "limit_message"]
 
 #: most callbacks answered during one student call (safe functions are not limited)
 MAX_CALLBACKS = 200_000
@@ -160,7 +161,9 @@ def traced(function: Callable[..., Any], *, name: str = "f", safe: bool = False)
         Evaluate the function inside the worker (much faster for many scalar
         calls). Only for functions in :data:`autograder.protocol.SAFE_FUNCTIONS`
         (pure numpy ufuncs such as ``np.sin``); anything else raises
-        :class:`~autograder.errors.UsageError`.
+        :class:`~autograder.errors.UsageError`. The counts and points of a safe
+        function are reported by the worker, which the student's code controls:
+        when they decide a grade, leave ``safe`` off.
     """
     if isinstance(function, Traced):
         return function
@@ -176,9 +179,31 @@ def _safe_name(function: Callable[..., Any]) -> str:
                      f"functions can ({allowed}). Leave out safe=True to evaluate it in the grader.")
 
 
+_PLAIN_TYPES = frozenset({type(None), bool, int, float, complex, str, bytes, np.ndarray,
+                          np.float64, np.int64})
+
+
 def _plain_leaf(x: object) -> bool:
-    return x is None or isinstance(x, (bool, int, float, complex, str, bytes, np.ndarray,
-                                       np.generic))
+    return type(x) in _PLAIN_TYPES or isinstance(
+        x, (bool, int, float, complex, str, bytes, np.ndarray, np.generic))
+
+
+def _holds_callable(value: Any, depth: int = 0) -> bool:
+    """Whether ``value`` is or contains (in lists, tuples, dicts) something callable;
+    fast on long lists of numbers, which most checks pass."""
+    if type(value) in _PLAIN_TYPES or depth > protocol.MAX_DEPTH:
+        return False
+    if isinstance(value, dict):
+        value = list(value.values())
+    if isinstance(value, (list, tuple)):
+        kinds = set(map(type, value))  # in C: a long list of numbers or of points is quick
+        if kinds <= _PLAIN_TYPES:
+            return False
+        if kinds <= _PLAIN_TYPES | {tuple, list} and all(
+                set(map(type, v)) <= _PLAIN_TYPES for v in value if type(v) in (tuple, list)):
+            return False
+        return any(type(v) not in _PLAIN_TYPES and _holds_callable(v, depth + 1) for v in value)
+    return callable(value) and not _plain_leaf(value)
 
 
 class CallbackRegistry:
@@ -201,6 +226,8 @@ class CallbackRegistry:
     def export(self, value: Any, _depth: int = 0) -> Any:
         """``value`` with every callable in it (at any depth of lists, tuples and dicts)
         replaced by a ref registered here; plain values are returned as they are."""
+        if _depth == 0 and not _holds_callable(value):
+            return value
         if _plain_leaf(value) or _depth > protocol.MAX_DEPTH:
             return value
         if isinstance(value, (list, tuple)):
@@ -255,7 +282,7 @@ class CallbackRegistry:
         self.callbacks += 1
         if self.callbacks > self.max_callbacks:
             self.exceeded = True
-            return _error("RuntimeError", _limit_message(function.name, self.max_callbacks),
+            return _error("RuntimeError", limit_message(function.name, self.max_callbacks),
                           error="limit")
         args, kwargs = message.get("args"), message.get("kwargs")
         if not isinstance(args, list) or not isinstance(kwargs, dict):
@@ -281,7 +308,8 @@ class CallbackRegistry:
         return {"op": "callback-result", "ok": True, "value": value}
 
 
-def _limit_message(name: str, limit: int) -> str:
+def limit_message(name: str, limit: int) -> str:
+    """The message for a student call that needed more than ``limit`` callbacks."""
     return (f"your code called `{name}` (with the other functions the grader gave it) more than "
             f"{limit:,} times in one call, so the grader stopped answering. Look for a loop that "
             "evaluates the function again and again instead of once per point.")
@@ -314,7 +342,3 @@ def _describe(value: Any) -> str:
         return repr(value)
     return f"a {type(value).__name__}"
 
-
-def limit_message(name: str, limit: int) -> str:
-    """The message for a student call that needed more than ``limit`` callbacks."""
-    return _limit_message(name, limit)

@@ -6,14 +6,18 @@ import argparse
 import os
 import sys
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
-from autograder import api
-from autograder.backends import DaskSpec, TLSFiles
+import autograder
 from autograder.errors import AutograderError, UsageError
-from autograder.sandbox import probe_support
-from autograder.grading import GradingOptions
-from autograder.results import SubmissionResult
+
+# Everything heavier (the API, and through it nbformat, pytest, numpy, IPython) is
+# imported inside the handler that needs it, so that `--help` and `--version` start
+# in a fraction of a second (tests/autograder/test_startup.py checks sys.modules).
+if TYPE_CHECKING:
+    from autograder.backends import DaskSpec, TLSFiles
+    from autograder.grading import GradingOptions
+    from autograder.results import SubmissionResult
 
 
 def _positive_int(text: str) -> int:
@@ -40,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="autograder",
         description="Release, grade and check notebook assignments in a sandboxed worker.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {autograder.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     rel = commands.add_parser("release", help="write the student version of an assignment")
@@ -128,6 +133,8 @@ def _cluster_security_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _tls(args: argparse.Namespace) -> "TLSFiles | None":
+    from autograder.backends import TLSFiles
+
     if args.tls_ca_file is None and args.tls_cert is None:
         if args.tls_key is not None:
             raise UsageError("--tls-key needs --tls-ca-file and --tls-cert.")
@@ -139,6 +146,8 @@ def _tls(args: argparse.Namespace) -> "TLSFiles | None":
 
 
 def _dask(args: argparse.Namespace) -> "DaskSpec | None":
+    from autograder.backends import DaskSpec
+
     if args.dask is None:
         if args.insecure or args.tls_ca_file or args.tls_cert:
             raise UsageError("--insecure and --tls-* options are for --dask ADDRESS.")
@@ -147,6 +156,8 @@ def _dask(args: argparse.Namespace) -> "DaskSpec | None":
 
 
 def _merge(args: argparse.Namespace) -> int:
+    from autograder import api
+
     report = api.merge(args.folders, out=args.out, assignment=args.assignment, junit=args.junit)
     print(f"Merged {len(report.results)} result(s) from {len(report.sources)} folder(s) into "
           f"{args.out}: {args.out / 'grades.csv'}, {args.out / 'summary.html'}")
@@ -157,6 +168,8 @@ def _merge(args: argparse.Namespace) -> int:
 
 
 def _worker(args: argparse.Namespace) -> int:
+    from autograder import api
+
     print(f"autograder worker: serving {args.slots} grading slot(s) to {args.address}; "
           "Ctrl-C stops.", file=sys.stderr)
     api.run_worker(args.address, slots=args.slots, tls=_tls(args), insecure=args.insecure)
@@ -202,12 +215,19 @@ def _timing_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _options(args: argparse.Namespace) -> GradingOptions:
+    from autograder.grading import GradingOptions
+
     return GradingOptions(notebook_timeout=args.timeout, call_timeout=args.call_timeout,
                           public_only=getattr(args, "public_only", False))
 
 
 def _grade(args: argparse.Namespace) -> int:
+    from autograder import api
+
     quiet = args.no_progress or args.ci
+    if args.dask is None and not quiet and sys.stderr.isatty():  # beside the progress bar
+        print(f"autograder: starting up to {args.jobs or os.cpu_count() or 1} grading worker(s); "
+              "the first results follow once they are warm...", file=sys.stderr)
     report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
                        options=_options(args), progress=False if quiet else None,
                        dask=_dask(args), shard=args.shard,
@@ -253,12 +273,16 @@ def format_check(result: SubmissionResult) -> str:
 
 
 def _check(args: argparse.Namespace) -> int:
+    from autograder import api
+
     result = api.check(args.notebook, assignment=args.assignment, options=_options(args))
     print(format_check(result))
     return 0 if result.score >= result.max_score else 1
 
 
 def _new(args: argparse.Namespace) -> int:
+    from autograder import api
+
     folder = api.new(args.name, out=args.out, title=args.title)
     print(f"Wrote {folder}: edit {args.name}.ipynb, the checks and the examples, then run "
           f"`autograder validate {folder}`.")
@@ -266,6 +290,7 @@ def _new(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
+    from autograder import api
     from autograder.validate import format_report
 
     report = api.validate(args.assignment, work=args.work, jobs=args.jobs, options=_options(args))
@@ -274,12 +299,16 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _release(args: argparse.Namespace) -> int:
+    from autograder import api
+
     path = api.release(args.assignment, out=args.out)
     print(f"Wrote the student version to {path.parent} (notebook: {path.name}).")
     return 0
 
 
 def _gradescope(args: argparse.Namespace) -> int:
+    from autograder import api
+
     path = api.gradescope(args.assignment, out=args.out)
     print(f"Wrote {path}: upload it as the autograder in the Gradescope assignment's settings.")
     return 0
@@ -315,6 +344,8 @@ def _submit(args: argparse.Namespace) -> int:
 
 def _say_missing_protections() -> None:
     """Say once, before grading, which protections this machine cannot give."""
+    from autograder.sandbox import probe_support
+
     for note in probe_support().notes:
         print(f"autograder: note: {note}", file=sys.stderr)
 

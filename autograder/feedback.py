@@ -52,7 +52,7 @@ KIND_LABELS = {
     "timeout": "took too long", "not-run": "not run (an earlier input ran out of time)",
     "unsupported": "answer could not be checked",
     "crashed": "your code stopped the worker", "forbidden": "uses something not allowed",
-    "check-error": "the check itself failed (not your fault)",
+    "check-error": "the check could not use your answer",
 }
 
 

@@ -223,10 +223,16 @@ class Grader:
         forbidden = forbidden_functions(self.assignment, sources, numbers, report)
         notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
         call_timeout = self.options.call_timeout or self.assignment.call_timeout
+        budget = self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+        # RLIMIT_CPU is the kernel's last word on one process: never below the budget the
+        # engine itself enforces, so an honest slow submission meets the engine's message.
+        limits = self.policy.limits
+        policy = replace(self.policy, limits=replace(
+            limits, cpu_seconds=max(limits.cpu_seconds, int(budget) + 5)))
         session = StudentSession(
-            slot=self._slot, cells=cells, data_files=self._data_files(), policy=self.policy,
+            slot=self._slot, cells=cells, data_files=self._data_files(), policy=policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
-            cpu_budget=self.options.cpu_budget or notebook_timeout + 20 * call_timeout,
+            cpu_budget=budget,
             forbid=self.assignment.rules.to_wire())
         try:
             run = session.start()
@@ -281,11 +287,38 @@ class Grader:
         roots = {self.assignment.root.resolve(), self.assignment.root.resolve().parent}
         if out_dir is not None:  # the batch's result folder: every student's results
             roots.add(out_dir.resolve().parent)
+        roots.update(forbidden_module_paths(self.assignment))
         package = Path(autograder.__file__).resolve().parent
         roots.add(package)
         if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
             roots.add(package.parent)
         return sorted(roots)
+
+
+@functools.lru_cache(maxsize=32)
+def _module_paths(names: tuple[str, ...]) -> tuple[Path, ...]:
+    found: list[Path] = []
+    for name in names:
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError, AttributeError):  # not installed, or an attribute
+            continue
+        if spec is None:
+            continue
+        if spec.submodule_search_locations:
+            found += [Path(p).resolve() for p in spec.submodule_search_locations]
+        elif spec.origin and os.path.isabs(spec.origin):
+            found.append(Path(spec.origin).resolve())
+    return tuple(found)
+
+
+def forbidden_module_paths(assignment: Assignment) -> tuple[Path, ...]:
+    """Files and folders of the forbidden modules, kept out of the worker's reach.
+
+    Names an allowed library needs inside (``[rules] internal_use``) stay readable.
+    """
+    rules = assignment.rules
+    return _module_paths(tuple(n for n in rules.forbid if n not in rules.internal_use))
 
 
 def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> int:

@@ -317,8 +317,9 @@ def _support_notes(abi: int, is_root: bool, can_unshare: bool) -> tuple[str, ...
         notes.append(f"Landlock ABI {abi} cannot scope signals (needs ABI 6): only the "
                      "separate user id stops the child from signalling the grader.")
     if not is_root:
-        notes.append("Not running as root: the child keeps the grader's user id and "
-                     "network; RLIMIT_NPROC is set to the limit plus the user's existing tasks.")
+        notes.append("Not running as root: the child keeps the grader's user id (its "
+                     "network, IPC and mount namespaces come from a user namespace where "
+                     "allowed); RLIMIT_NPROC is set to the limit plus the user's existing tasks.")
     elif not can_unshare:
         notes.append("A network namespace cannot be created here: only Landlock "
                      "blocks TCP.")

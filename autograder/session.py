@@ -345,12 +345,17 @@ def kill_descendants(root: int) -> bool:
     For a grader that is not root (no user of the slot's own, no cgroup): the warm
     parent is a child subreaper, so a process whose parent died is re-parented to
     it rather than to init, and the whole tree stays below it. Each round kills
-    what it finds; a killed process cannot fork again, so the rounds end.
+    what it finds; a killed process cannot fork again, so the rounds end. A listing
+    of ``/proc`` is not atomic (a child may get a pid the listing already passed), so
+    only several empty rounds in a row count as "none left". A backstop: the seccomp
+    filter keeps every process in the child's process group, which is killed first.
     Returns True when none is left.
     """
+    quiet = 0
     for _ in range(KILL_ROUNDS):
         found = _descendants(root)
-        if not found:
+        quiet = 0 if found else quiet + 1
+        if quiet >= QUIET_ROUNDS:
             return True
         for pid in found:
             try:
@@ -383,6 +388,8 @@ def _descendants(root: int) -> set[int]:
 
 #: rounds of killing before a sweep gives up (each round waits a few milliseconds)
 KILL_ROUNDS = 500
+#: empty listings in a row after which a sweep of descendants counts as done
+QUIET_ROUNDS = 3
 
 
 def sweep_slot(policy: IsolationPolicy, slot: int, warm_parent: int | None) -> None:
@@ -436,12 +443,14 @@ class StudentSession:
     _sock: socket.socket | None = None
     _workdir: Path | None = None
     _clock: CpuClock | None = None
+    _started_at: float | None = None
     report: RunReport | None = None
 
     # -- lifecycle -------------------------------------------------------
     def start(self) -> RunReport:
         """Run the notebook; a cell that hangs or kills the worker is skipped and the rest re-run."""
         begin = time.perf_counter()
+        self._started_at = time.monotonic()
         notes: list[str] = []
         cells: list[CellReport] = []
         stdout, functions = "", []
@@ -578,12 +587,22 @@ class StudentSession:
     def _budget_left(self) -> float:
         return float("inf") if self.cpu_budget is None else self.cpu_budget - self.cpu_seconds
 
+    def _wall_budget_spent(self) -> bool:
+        """Past the submission's wall-clock budget: code that mostly sleeps or waits."""
+        if self.cpu_budget is None or self._started_at is None:
+            return False
+        return time.monotonic() - self._started_at > wall_backstop(self.cpu_budget)
+
     def request(self, message: dict[str, Any], *, timeout: float, what: str) -> dict[str, Any]:
         """Send ``message`` and return the answer, or raise a :class:`StudentError`.
 
         ``timeout`` is in CPU seconds. Callback requests from the worker (a student
         function calling a function a check passed) are answered in between.
         """
+        if self._wall_budget_spent():
+            raise NotRun(f"{what} was not run: your submission used its whole time budget "
+                         f"({wall_backstop(self.cpu_budget or 0):g} s), mostly waiting rather "
+                         "than computing (sleep, input, locks).")
         if self._budget_left() <= 0:
             raise NotRun(f"{what} was not run: your submission used its whole time budget "
                          f"({self.cpu_budget:g} s of CPU) on earlier cells and calls.")

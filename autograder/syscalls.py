@@ -56,6 +56,7 @@ MS_NODEV = 0x4
 MS_NOEXEC = 0x8
 MS_REC = 0x4000
 MS_PRIVATE = 1 << 18
+MNT_DETACH = 2
 # <linux/prctl.h>
 PR_GET_DUMPABLE = 3
 PR_SET_DUMPABLE = 4
@@ -187,8 +188,12 @@ def _mount_quota(workdir: Path, quota_bytes: int) -> None:
     try:
         options = f"size={quota_bytes},nr_inodes=65536,mode=0700"
         _mount("tmpfs", str(workdir), "tmpfs", MS_NOSUID | MS_NODEV | MS_NOEXEC, options)
-        os.chown(workdir, os.getuid(), os.getgid())
-        shutil.copytree(f"/proc/self/fd/{old}", workdir, symlinks=True, dirs_exist_ok=True)
+        try:
+            os.chown(workdir, os.getuid(), os.getgid())
+            shutil.copytree(f"/proc/self/fd/{old}", workdir, symlinks=True, dirs_exist_ok=True)
+        except (OSError, shutil.Error) as exc:  # e.g. the public data exceed the quota
+            _check("umount2", _libc().umount2(os.fsencode(workdir), MNT_DETACH))
+            raise OSError(errno.ENOSPC, f"the working directory does not fit: {exc}") from exc
     finally:
         os.close(old)
 

@@ -22,8 +22,7 @@ from typing import Callable
 import numpy as np
 import scipy.spatial as ss
 
-from reference import delaunay
-from reference import convex_hull
+from reference import convex_hull, delaunay
 
 N_HULL = 100_000
 N_DELAUNAY = 10_000

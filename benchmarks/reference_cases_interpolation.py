@@ -21,8 +21,7 @@ from typing import Callable
 import numpy as np
 import scipy.interpolate as si
 
-from reference import bezier
-from reference import barycentric_interpolate, chebyshev_nodes
+from reference import barycentric_interpolate, bezier, chebyshev_nodes
 
 N_NODES = 100
 N_EVAL = 1_000_000

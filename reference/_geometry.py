@@ -193,7 +193,9 @@ def orient2d(p: ArrayLike, q: ArrayLike, r: ArrayLike) -> int:
 # ---------------------------------------------------------------------------
 
 
-def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -> NDArray[np.intp]:
+def _akl_toussaint(
+    points: NDArray[np.float64], idx: NDArray[np.intp], k: int, *, rounded: bool = False
+) -> NDArray[np.intp]:
     """Drop points of ``idx`` that lie strictly inside a polygon of input points.
 
     The polygon joins the points extreme in ``k`` directions, in the order of
@@ -204,6 +206,13 @@ def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -
     the extremes need not be computed exactly. The left-of tests use a margin
     that bounds every rounding error, so a point is dropped only when it is
     certainly strictly inside; doubtful points are kept for the exact stage.
+
+    ``rounded=True`` says that ``points`` are the correctly rounded doubles of
+    exact coordinates (integers beyond ``2**53``): each coordinate is then
+    off by at most ``eps M`` (``M`` the largest magnitude), which changes the
+    exact left-of expression ``dx (y - ay) - dy (x - ax)`` (six coordinates,
+    each partial derivative at most ``4 M``) by at most ``24 eps M**2``; a
+    margin of ``32 eps M**2`` is added for it.
     """
     x = points[idx, 0]
     y = points[idx, 1]
@@ -211,6 +220,7 @@ def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -
     my = float(np.max(np.abs(y)))
     if max(mx, my) > 1e150:  # differences could overflow: skip the heuristic
         return idx
+    slack = 32 * 2.0**-53 * max(mx, my) ** 2 if rounded else 0.0
     if k == 8:  # directions at multiples of 45 degrees, without a 2-D array
         s = x + y
         t = x - y
@@ -232,7 +242,7 @@ def _akl_toussaint(points: NDArray[np.float64], idx: NDArray[np.intp], k: int) -
         # Exact value (dx*(y - ay) - dy*(x - ax)) minus the computed
         # (dx*y - dy*x) - c is at most ~8 eps (|dx| my + |dy| mx); the margin
         # is 90 eps times that, plus an absolute term for underflow.
-        margin = 1e-14 * (abs(dx) * my + abs(dy) * mx) + 1e-300
+        margin = 1e-14 * (abs(dx) * my + abs(dy) * mx) + 1e-300 + slack
         c = dx * ay - dy * ax
         inside &= (dx * y - dy * x) > c + margin
     return idx[~inside]
@@ -267,14 +277,15 @@ def _monotone_chain(points: NDArray[Any], order: NDArray[np.intp]) -> list[int]:
     return [ids[i] for i in lower[:-1] + upper[:-1]]
 
 
-def _hull_monotone(points: NDArray[Any]) -> list[int]:
+def _hull_monotone(points: NDArray[Any], approx: NDArray[np.float64]) -> list[int]:
     idx = np.arange(points.shape[0])
-    # The prefilter's rounding margins hold for doubles; exact integer input
-    # beyond 2**53 goes straight to the exact scan.
-    if idx.size > 64 and points.dtype != object:
-        idx = _akl_toussaint(points, idx, 8)
+    # The prefilter works on doubles; for exact integers beyond 2**53 it runs
+    # on their rounded values with a margin for the rounding.
+    rounded = points.dtype == object
+    if idx.size > 64:
+        idx = _akl_toussaint(approx, idx, 8, rounded=rounded)
         if idx.size > 2048:
-            idx = _akl_toussaint(points, idx, 64)
+            idx = _akl_toussaint(approx, idx, 64, rounded=rounded)
     return _monotone_chain(points, idx[P.sorted_unique(points[idx])])
 
 
@@ -397,7 +408,8 @@ def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]
 
     *Integers.* Integer coordinates are used exactly: up to ``2**53`` as
     doubles, beyond (int64 near ``2**62``, Python ints) in exact integer
-    arithmetic, without the prefilter.
+    arithmetic; the prefilter then works on their rounded values with a
+    margin that covers the rounding.
 
     References
     ----------
@@ -432,5 +444,5 @@ def convex_hull(points: ArrayLike, method: str = "monotone") -> NDArray[np.intp]
     if method == "jarvis":
         hull = _hull_jarvis(pts, approx)
     else:
-        hull = _hull_monotone(pts)
+        hull = _hull_monotone(pts, approx)
     return np.asarray(hull, dtype=np.intp)

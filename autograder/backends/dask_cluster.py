@@ -31,6 +31,7 @@ import sys
 import threading
 import time
 import uuid
+from collections import deque
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
 from typing import Any, Sequence
@@ -87,15 +88,17 @@ class GradingSlots(WorkerPlugin):
         self._grader: Grader | None = None
         self._home: Path | None = None
         self._lock = threading.Lock()
+        self._ready = threading.Event()
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        state.update(_grader=None, _home=None, _lock=None)
+        state.update(_grader=None, _home=None, _lock=None, _ready=None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._lock = threading.Lock()
+        self._ready = threading.Event()
 
     async def setup(self, worker: distributed.Worker) -> None:
         try:
@@ -104,6 +107,8 @@ class GradingSlots(WorkerPlugin):
             self.problem = f"worker {worker.address} cannot grade: {exc}"
             log.error("%s", self.problem)
             await worker.set_resources(**{RESOURCE: 0})
+        finally:
+            self._ready.set()  # a task that arrived during the set-up may go on
 
     def _prepare(self) -> None:
         if engine_fingerprint() != self.fingerprint:
@@ -126,6 +131,7 @@ class GradingSlots(WorkerPlugin):
 
     def grade(self, data: bytes, filename: str, sub_id: str) -> dict[str, Any]:
         """Grade one submission's bytes; return ``{"result": dict, "files": {path: bytes}}``."""
+        self._ready.wait(timeout=600)
         if self._grader is None or self._home is None:
             raise EngineError(self.problem or "the grading slot of this worker is not open")
         with self._lock:  # one grading at a time per slot, whatever the worker's threads
@@ -136,7 +142,10 @@ class GradingSlots(WorkerPlugin):
                 source.write_bytes(data)
                 try:
                     result = self._grader.grade(source, id=sub_id, out_dir=out)
-                except Exception as exc:  # the grader's own failure is a result, not a task error
+                except (Exception, KeyboardInterrupt) as exc:
+                    # The grader's own failure is a result, not a task error. A task thread
+                    # never receives Ctrl-C (signals go to the main thread), so an interrupt
+                    # here is the engine's "checks run interrupted": never a graded result.
                     result = error_result(self._grader.assignment, source, sub_id, exc)
                 files = {p.relative_to(out).as_posix(): p.read_bytes()
                          for p in sorted(out.rglob("*")) if p.is_file()
@@ -197,6 +206,12 @@ def local_cluster(workers: int, **options: Any) -> LocalCluster:
     return LocalCluster(**settings)
 
 
+def grading_slots(client: Client) -> int:
+    """How many gradings the cluster's workers can run at once now."""
+    workers = client.scheduler_info(n_workers=-1)["workers"].values()
+    return int(sum(w.get("resources", {}).get(RESOURCE, 0) for w in workers))
+
+
 class DaskBackend:
     """Grades on a Dask cluster; ``local:N`` starts one of N processes here for the run."""
 
@@ -224,10 +239,7 @@ class DaskBackend:
         try:
             client.register_plugin(plugin, name=plugin.name)
             self._say_worker_problems(client, plugin.name)
-            futures = {client.submit(grade_task, plugin.name, job.path.read_bytes(), job.path.name,
-                                     job.id, key=f"grade-{job.id}-{uuid.uuid4().hex[:8]}",
-                                     resources={RESOURCE: 1}, pure=False): job for job in jobs}
-            self._collect(client, futures, assignment, options, out_dir, finished)
+            self._collect(client, plugin.name, list(jobs), assignment, options, out_dir, finished)
         finally:
             try:
                 if cluster is None:  # a shared cluster: close this run's slots on every worker
@@ -250,23 +262,44 @@ class DaskBackend:
             print("autograder: note: no Dask worker is connected yet; gradings start when one "
                   "joins (autograder worker ADDRESS --slots N).", file=sys.stderr)
 
-    def _collect(self, client: Client, futures: dict[Any, Job], assignment: Assignment,
+    def _collect(self, client: Client, plugin: str, jobs: list[Job], assignment: Assignment,
                  options: GradingOptions, out_dir: Path, finished: Finished) -> None:
-        pending = set(futures)
+        """Keep one task per grading slot in flight; store each result as it arrives.
+
+        Submitting only as many tasks as there are slots (rather than all at once)
+        keeps Dask from queueing several gradings on one worker: when a worker
+        dies, only the grading it was running counts the death, and a
+        submission that kills workers cannot take innocent ones down with it.
+        """
+        queue = deque(jobs)
+        running: dict[Any, Job] = {}
         last = time.monotonic()
-        while pending:
+
+        def top_up() -> None:
+            capacity = max(1, grading_slots(client))
+            while queue and len(running) < capacity:
+                job = queue.popleft()
+                running[client.submit(grade_task, plugin, job.path.read_bytes(), job.path.name, job.id,
+                                      key=f"grade-{job.id}-{uuid.uuid4().hex[:8]}",
+                                      resources={RESOURCE: 1}, pure=False)] = job
+
+        top_up()
+        while running:
             try:
-                done, pending = wait(pending, timeout=self.spec.warn_after, return_when="FIRST_COMPLETED")
-            except TimeoutError:
-                quiet = time.monotonic() - last
-                slots = sum(w.get("resources", {}).get(RESOURCE, 0)
-                            for w in client.scheduler_info()["workers"].values())
-                print(f"autograder: warning: no result arrived for {quiet:.0f} s; {len(pending)} "
-                      f"submission(s) still to grade on {slots:g} grading slot(s).", file=sys.stderr)
+                done, _ = wait(list(running), timeout=min(5.0, self.spec.warn_after),
+                               return_when="FIRST_COMPLETED")
+            except TimeoutError:  # no result yet: new workers may have joined; say so when long
+                if time.monotonic() - last >= self.spec.warn_after:
+                    print(f"autograder: warning: no result arrived for {time.monotonic() - last:.0f} s; "
+                          f"{len(running) + len(queue)} submission(s) still to grade on "
+                          f"{grading_slots(client)} grading slot(s).", file=sys.stderr)
+                    last = time.monotonic()
+                top_up()
                 continue
             last = time.monotonic()
             for future in done:
-                finished(self._store(future, futures[future], assignment, options, out_dir))
+                finished(self._store(future, running.pop(future), assignment, options, out_dir))
+            top_up()
 
     @staticmethod
     def _store(future: Any, job: Job, assignment: Assignment, options: GradingOptions,

@@ -30,7 +30,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from autograder.feedback import FEEDBACK_NAME
-from autograder.service import auth, gradebook, queue
+from autograder.service import auth, gradebook, jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.intake import UploadRejected, accept
 from autograder.service.models import Extension, Job, Submission, User, utcnow
@@ -444,7 +444,7 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
                     Job.submission_id.in_(ids), Job.state.in_(("queued", "running")))))
                 for sub_id in ids:
                     if sub_id not in waiting:
-                        queue.enqueue(session, sub_id, kind="regrade")
+                        jobqueue.enqueue(session, sub_id, kind="regrade")
                 return len(ids) - len(waiting)
 
         count = await run_in_threadpool(queue_all)

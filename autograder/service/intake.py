@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.errors import NotebookError, UsageError
 from autograder.notebook import read_notebook
-from autograder.service import queue
+from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
 from autograder.service.standing import deadline_for
@@ -75,7 +75,7 @@ def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, 
                                 status="queued")
         session.add(submission)
         session.flush()
-        queue.enqueue(session, submission.id)
+        jobqueue.enqueue(session, submission.id)
     return submission
 
 

@@ -4,9 +4,9 @@ Grading is CPU-bound, blocking, and runs pytest in the grading process, so it
 runs in separate processes (never on the web server's event loop or threads).
 Each process keeps one Grader per assignment alive between jobs (rebuilt when
 the assignment's checks change), claims a job, renews the lease from a small
-thread while it grades, and records the result. The kernel kills these
-processes if the service dies (``PR_SET_PDEATHSIG``), and a killed job's lease
-runs out and another grader takes it.
+thread while it grades, and records the result. These processes end when the
+service dies, even by SIGKILL (``PR_SET_PDEATHSIG`` and a thread watching the
+parent), and a killed job's lease runs out and another grader takes it.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from autograder.feedback import write_feedback
 from autograder.grading import Grader, GradingOptions
 from autograder.report import write_result
 from autograder.results import SubmissionResult
-from autograder.service import queue
+from autograder.service import jobqueue
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions
 from autograder.service.models import Submission
@@ -42,7 +42,7 @@ class WorkerSettings:
 
     course_path: str
     database_url: str
-    lease_seconds: float = queue.LEASE_SECONDS
+    lease_seconds: float = jobqueue.LEASE_SECONDS
     poll_seconds: float = 0.2
 
 
@@ -82,7 +82,7 @@ def _die_with_parent() -> None:
 
 
 def grade_job(graders: _Graders, storage: Storage, submission: Submission,
-              job: queue.Claimed, *, max_tries: int) -> tuple[SubmissionResult, str]:
+              job: jobqueue.Claimed, *, max_tries: int) -> tuple[SubmissionResult, str]:
     """Grade one job into its own result folder; an engine failure becomes an "error" result."""
     out = storage.result_dir(job.job_id, job.claim)
     notebook = storage.upload_path(submission.sha256)
@@ -113,10 +113,26 @@ def _error(submission: Submission, notebook: Path, exc: BaseException) -> Submis
                                 execution_time=0.0, seed=0)
 
 
-def _keep_lease(factory: Any, job: queue.Claimed, settings: WorkerSettings,
+def _watch_parent(parent: int, graders: _Graders) -> None:
+    """End this process when the service is gone (SIGKILL included).
+
+    ``PR_SET_PDEATHSIG`` alone is not enough: the kernel clears it when a process's
+    credentials change, which the engine may do while setting up a slot. So this
+    thread also watches the parent id; it stops the warm workers (for a few
+    seconds at most) and exits.
+    """
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    closer = threading.Thread(target=graders.close, daemon=True)
+    closer.start()
+    closer.join(5)
+    os._exit(1)
+
+
+def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: WorkerSettings,
                 stop: threading.Event) -> None:
     while not stop.wait(settings.lease_seconds / 3):
-        if not queue.renew(factory, job, lease_seconds=settings.lease_seconds):
+        if not jobqueue.renew(factory, job, lease_seconds=settings.lease_seconds):
             return
 
 
@@ -130,9 +146,10 @@ def worker_main(settings: WorkerSettings, stop: Any, name: str) -> None:
     factory = sessions(engine)
     storage = Storage(course.data_dir)
     graders = _Graders(course)
+    threading.Thread(target=_watch_parent, args=(parent, graders), daemon=True).start()
     try:
         while not stop.is_set() and os.getppid() == parent:
-            job = queue.claim(factory, lease_seconds=settings.lease_seconds)
+            job = jobqueue.claim(factory, lease_seconds=settings.lease_seconds)
             if job is None:
                 stop.wait(settings.poll_seconds)
                 continue
@@ -150,7 +167,8 @@ def worker_main(settings: WorkerSettings, stop: Any, name: str) -> None:
             finally:
                 halt.set()
                 keeper.join()
-            queue.finish(factory, job, result, folder, worker=name, max_tries=course.max_tries)
+            jobqueue.finish(factory, job, result, folder, worker=name, max_tries=course.max_tries)
+            _die_with_parent()  # again: grading may have changed credentials, which clears it
     finally:
         graders.close()
         engine.dispose()

@@ -154,8 +154,8 @@ def _unreadable_path() -> tuple[str, str] | None:
     for name in ("numpy", "scipy", "matplotlib", "IPython"):
         module = sys.modules.get(name)
         origin = getattr(module, "__file__", None)
-        if origin:
-            probes += [os.path.dirname(origin), origin]
+        if origin:  # the file itself: a package folder may be split around a forbidden module
+            probes.append(origin)
     for path in probes:
         try:
             if os.path.isdir(path):

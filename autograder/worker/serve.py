@@ -52,8 +52,14 @@ class StaleCallback(RuntimeError):
     """A function the grader passed was called after the call it was passed to returned."""
 
 
-class CallbackLimitExceeded(RuntimeError):
-    """The student's code called the grader's functions more often than one call allows."""
+class CallbackLimitExceeded(BaseException):
+    """The student's code called the grader's functions more often than one call allows.
+
+    A ``BaseException``, like ``KeyboardInterrupt``: ``except Exception`` in the
+    student's loop does not swallow it, and once raised, every further call of a
+    grader function in the same call raises it again at once, without asking the
+    grader, so a loop that swallows it anyway only burns its own CPU time.
+    """
 
 
 def student_traceback(exc: BaseException) -> str:
@@ -137,6 +143,8 @@ class Channel:
         self.sock = sock
         self.generation = 0
         self.in_call = False
+        #: the grader's message once it refused more callbacks in this call
+        self.limited = ""
         self.used_locally: list[GraderFunction] = []
         self.returned: dict[str, Callable[..., Any]] = {}
         self._next = 0
@@ -153,6 +161,8 @@ class Channel:
 
     def callback(self, ref: protocol.CallableRef, args: tuple, kwargs: dict[str, Any]) -> Any:
         """Ask the grader to evaluate ``ref``; return its value or raise its error here."""
+        if self.limited:
+            raise CallbackLimitExceeded(self.limited)
         message = {"op": "callback", "id": ref.id, "args": list(args), "kwargs": kwargs}
         try:
             tree, buffers = protocol.encode(message)
@@ -169,7 +179,8 @@ class Channel:
             return value
         error, message_text = str(reply.get("error", "")), str(reply.get("message", ""))[:2000]
         if error == "limit":
-            raise CallbackLimitExceeded(message_text)
+            self.limited = message_text or "too many calls of the grader's functions"
+            raise CallbackLimitExceeded(self.limited)
         if error == "stale":
             raise StaleCallback(message_text)
         raise _BUILTIN_ERRORS.get(str(reply.get("type")), RuntimeError)(message_text)
@@ -184,7 +195,7 @@ class Channel:
     def end_call(self) -> None:
         """Report the safe functions' counts, then make every stub of this call stale."""
         used, self.used_locally = self.used_locally, []
-        self.in_call = False
+        self.in_call, self.limited = False, ""
         self.generation += 1
         if used:
             # Not waited for: the grader's acknowledgement arrives before its next

@@ -166,7 +166,9 @@ def test_shards_merged_equal_the_whole_run(class_folder: tuple[list[Path], Path]
     merged = api.merge(folders, out=tmp_path / "merged", junit=tmp_path / "junit.xml")
     assert len(merged.results) == len(subs)
     assert (tmp_path / "merged" / "grades.csv").read_text() == (whole / "grades.csv").read_text()
-    assert (tmp_path / "merged" / "summary.json").read_text() == (whole / "summary.json").read_text()
+    untimed = [{k: v for k, v in json.loads((folder / "summary.json").read_text()).items()
+                if "seconds" not in k} for folder in (tmp_path / "merged", whole)]
+    assert untimed[0] == untimed[1]  # the same class summary, but for how long each shard took
     assert all((tmp_path / "merged" / r.id / "feedback.html").is_file() for r in merged.results)
     assert (tmp_path / "junit.xml").read_text().count("<testsuite ") == len(subs)
 

@@ -122,8 +122,7 @@ def _car_png(jitter: float, colour: str) -> bytes:
     """A car drawn with the reference's strokes (``jitter`` moves the student's a little)."""
     from matplotlib.figure import Figure
 
-    from reference import car
-    from reference import plot_car
+    from reference import car, plot_car
 
     strokes = [s + jitter * np.sin(np.arange(s.size).reshape(s.shape)) for s in car()]
     fig = Figure(figsize=(4, 2), dpi=60)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import select
 import shutil
 import signal
 import tempfile
@@ -21,10 +22,13 @@ import pytest
 
 from autograder import cgroups
 from autograder.sandbox import IsolationPolicy, enter_sandbox, probe_support
-from autograder.session import _descendants, claim_slot, kill_descendants, kill_user, slot_lock_dir
+from autograder.session import claim_slot, kill_descendants, kill_user, slot_lock_dir
 
-SLOT = 9  # tests never claim slots: use one the quick tests do not use
-HYDRA_UID = 61990
+# Slots claimed like a grader's, held while the tests run: a grader running at the
+# same time never uses (or sweeps) their user ids and cgroups.
+SLOT, _SLOT_LOCK = claim_slot(100)
+OTHER_SLOT, _OTHER_LOCK = claim_slot(SLOT + 1)
+HYDRA_UID = IsolationPolicy().base_uid + SLOT
 DEADLINE = 20.0
 
 
@@ -41,8 +45,14 @@ def require_cgroups() -> cgroups.SlotCgroup:
     return group
 
 
-def hydra() -> None:
-    """Fork, let the parent exit, start a new session in the child; forever."""
+def hydra(beacon: int) -> None:
+    """Fork, let the parent exit, start a new session in the child; forever.
+
+    Each generation writes a byte to ``beacon``; the pipe reaches end-of-file only
+    when no generation holds it any more, which is how the tests tell that none is
+    left (a listing of /proc can miss a process whose pid changes all the time).
+    """
+    os.set_blocking(beacon, False)
     while True:
         try:
             pid = os.fork()
@@ -52,8 +62,27 @@ def hydra() -> None:
             os._exit(0)
         try:
             os.setsid()
+            os.write(beacon, b".")
         except OSError:
             pass
+
+
+def wait_for_beacon(read_fd: int) -> None:
+    """Until the hydra has written (it runs)."""
+    end = time.monotonic() + DEADLINE
+    while not select.select([read_fd], [], [], 0.1)[0]:
+        if time.monotonic() > end:
+            pytest.fail("the hydra did not start")
+    assert os.read(read_fd, 1 << 16), "the hydra ended by itself"
+
+
+def beacon_closed(read_fd: int) -> bool:
+    """True once every holder of the pipe's write end is gone (read returns EOF)."""
+    end = time.monotonic() + DEADLINE
+    while time.monotonic() < end:
+        if select.select([read_fd], [], [], 0.1)[0] and os.read(read_fd, 1 << 16) == b"":
+            return True
+    return False
 
 
 def uid_processes(uid: int) -> list[int]:
@@ -68,14 +97,6 @@ def uid_processes(uid: int) -> list[int]:
             if int(fields["Uid"].split()[0]) == uid and fields["State"].split()[0] != "Z":
                 found.append(int(name))
     return found
-
-
-def wait_until(condition, what: str) -> None:  # type: ignore[no-untyped-def]
-    end = time.monotonic() + DEADLINE
-    while not condition():
-        if time.monotonic() > end:
-            pytest.fail(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 @pytest.fixture
@@ -98,7 +119,7 @@ def reaped() -> Iterator[list[int]]:
 
 def test_every_slot_gets_the_same_cpu_weight() -> None:
     group = require_cgroups()
-    other = cgroups.slot_cgroup(SLOT + 1, processes=64)
+    other = cgroups.slot_cgroup(OTHER_SLOT, processes=64)
     assert other is not None
     for name in ("cpu.shares", "cpu.weight"):
         values = {(d / name).read_text() for g in (group, other) for d in g.dirs if (d / name).exists()}
@@ -125,21 +146,26 @@ def test_child_enters_its_slot_cgroup(tmp_path: Path, reaped: list[int]) -> None
 
 def test_kill_all_ends_a_process_that_reforks(reaped: list[int]) -> None:
     group = require_cgroups()
+    read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:
         try:
+            os.close(read_fd)
             group.join()
             os.setresuid(HYDRA_UID, HYDRA_UID, HYDRA_UID)
-            hydra()
+            hydra(write_fd)
         finally:
             os._exit(0)
     reaped.append(pid)
-    wait_until(lambda: len(group.pids()) > 0, "the hydra to start")
-    time.sleep(0.2)  # let it re-fork a few thousand times
-    assert group.kill_all()
-    time.sleep(0.2)
-    assert group.pids() == set()
-    assert uid_processes(HYDRA_UID) == []
+    os.close(write_fd)
+    try:
+        wait_for_beacon(read_fd)
+        time.sleep(0.2)  # let it re-fork many times
+        assert group.kill_all()
+        assert beacon_closed(read_fd), "a process of the hydra survived"
+        assert group.pids() == set()
+    finally:
+        os.close(read_fd)
 
 
 def test_pids_max_caps_the_slot(reaped: list[int]) -> None:
@@ -180,30 +206,39 @@ def test_pids_max_caps_the_slot(reaped: list[int]) -> None:
 
 def test_kill_user_ends_a_process_that_reforks(reaped: list[int]) -> None:
     require_root("a user of the slot's own")
+    read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:
         try:
+            os.close(read_fd)
             os.setresuid(HYDRA_UID, HYDRA_UID, HYDRA_UID)
-            hydra()
+            hydra(write_fd)
         finally:
             os._exit(0)
     reaped.append(pid)
-    wait_until(lambda: uid_processes(HYDRA_UID), "the hydra to start")
-    time.sleep(0.2)
-    assert kill_user(HYDRA_UID)
-    time.sleep(0.2)
-    assert uid_processes(HYDRA_UID) == []
+    os.close(write_fd)
+    try:
+        wait_for_beacon(read_fd)
+        time.sleep(0.2)
+        assert kill_user(HYDRA_UID)
+        assert beacon_closed(read_fd), "a process of the hydra survived"
+        assert uid_processes(HYDRA_UID) == []
+    finally:
+        os.close(read_fd)
 
 
 def test_kill_descendants_ends_a_process_that_reforks(reaped: list[int]) -> None:
     """The non-root sweep: the warm parent is a subreaper, orphans stay below it."""
+    read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:
         try:
+            os.close(read_fd)
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER
             if os.fork() == 0:
-                hydra()
+                hydra(write_fd)
+            os.close(write_fd)
             while True:  # reap adopted orphans, as the warm parent does
                 try:
                     os.wait()
@@ -212,12 +247,15 @@ def test_kill_descendants_ends_a_process_that_reforks(reaped: list[int]) -> None
         finally:
             os._exit(0)
     reaped.append(pid)
-    wait_until(lambda: _descendants(pid), "the hydra to start")
-    time.sleep(0.2)
-    assert kill_descendants(pid)
-    time.sleep(0.2)
-    assert _descendants(pid) == set()
-    assert os.waitpid(pid, os.WNOHANG) == (0, 0), "the warm parent itself must survive"
+    os.close(write_fd)
+    try:
+        wait_for_beacon(read_fd)
+        time.sleep(0.2)
+        assert kill_descendants(pid)
+        assert beacon_closed(read_fd), "a process of the hydra survived"
+        assert os.waitpid(pid, os.WNOHANG) == (0, 0), "the warm parent itself must survive"
+    finally:
+        os.close(read_fd)
 
 
 def test_slot_lock_folder_is_per_user_except_root() -> None:

@@ -153,8 +153,12 @@ def user_env() -> Iterator[envs.Env]:
     user = envs.ordinary_user()
     top = envs.shared_tempdir("numgrade-problems-")
     source = envs.copy_repository(top / "src")
-    env = envs.make_venv(top / "venv", install=[str(source)], python="/usr/bin/python3",
-                         user=user)
+    for folder, _, files in os.walk(top):  # the user builds in src and creates the venv
+        for path in [folder, *(os.path.join(folder, name) for name in files)]:
+            shutil.chown(path, user, user)
+    install = [str(source)] + ([str(source / "reference")]
+                               if (source / "reference" / "pyproject.toml").exists() else [])
+    env = envs.make_venv(top / "venv", install=install, python="/usr/bin/python3", user=user)
     yield env
     shutil.rmtree(top, ignore_errors=True)
 
@@ -194,8 +198,8 @@ def batch(request: pytest.FixtureRequest,
         env = dict(os.environ, SECRET_TOKEN=SECRET, TMPDIR=str(tmp))
         if env_user is None:
             return subprocess.run([sys.executable, *args], capture_output=True, text=True,
-                                  env=env, timeout=900, cwd=extra)
-        return env_user.run("python", *args, cwd=extra, timeout=1800,
+                                  env=env, timeout=3600, cwd=extra)
+        return env_user.run("python", *args, cwd=extra, timeout=3600,
                             env={"SECRET_TOKEN": SECRET, "TMPDIR": str(tmp)})
 
     keys_before, listeners = key_users(), Listeners()

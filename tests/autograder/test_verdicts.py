@@ -257,3 +257,25 @@ def test_no_spelling_reaches_a_forbidden_library(tmp_path: Path) -> None:
     for name, result in results(out).items():
         hull_checks = [t for t in result["tests"] if t["name"].startswith("convex_hull")]
         assert hull_checks and all(t["score"] == 0 for t in hull_checks), name
+
+
+# -- no submission sees another ---------------------------------------------------
+
+def test_started_from_the_course_folder_the_worker_reads_no_other_submission(tmp_path: Path) -> None:
+    """``python -m autograder`` puts the current folder on the grader's path: not readable."""
+    course = tmp_path / "course"
+    bob = course / "submitted" / "bob" / "hull" / "hull.ipynb"
+    bob.parent.mkdir(parents=True)
+    shutil.copy(SOLUTION, bob)
+    probe = (f"try:\n    open({str(bob)!r}).read(10)\n    print('READ-CLASSMATE')\n"
+             "except OSError as exc:\n    print('DENIED', type(exc).__name__)\n")
+    with_cell(SOLUTION, probe, course / "submitted" / "eve" / "hull" / "hull.ipynb")
+    from autograder.sandbox import probe_support
+    if probe_support().landlock_abi == 0:
+        pytest.skip("Landlock is not available on this kernel: files are not confined")
+    proc = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", "submitted",
+                           "--out", "results", "--public-only", "--no-progress"],
+                          cwd=course, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    stdout = results(course / "results")["eve"]["extra_data"]["stdout"]
+    assert "DENIED" in stdout and "READ-CLASSMATE" not in stdout

@@ -166,11 +166,15 @@ class Server:
                                      + (self.course.parent / "serve.log").read_text()[-3000:])
             time.sleep(0.3)
 
-    def kill(self) -> None:
-        """SIGKILL the service process only (its grading processes die with it)."""
+    def kill(self) -> list[int]:
+        """SIGKILL the service process only; return the ids of its child processes then."""
         assert self.proc is not None
+        children = Path(f"/proc/{self.proc.pid}/task/{self.proc.pid}/children")
+        pids = [int(p) for p in children.read_text().split()] if children.exists() else []
         self.proc.send_signal(signal.SIGKILL)
         self.proc.wait(30)
+        return pids
+
 
     def stop(self) -> None:
         if self.proc is None or self.proc.poll() is not None:
@@ -186,6 +190,15 @@ class Server:
         data = self.course.parent / "data" / "tokens.csv"
         with data.open() as handle:
             return {row["id"]: row["token"] for row in csv.DictReader(handle)}
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie waiting for its reaper counts as gone)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state != "Z"
 
 
 def upload(client: httpx.Client, url: str, token: str, assignment: str, data: bytes,

@@ -144,3 +144,32 @@ def test_pages_carry_a_strict_policy(service: Running, client: httpx.Client) -> 
     assert "frame-ancestors 'none'" in policy
     script = client.get(f"{service.url}/static/service.js")
     assert script.status_code == 200 and "http" not in script.text  # nothing remote
+
+
+def test_roster_command_adds_people_with_working_tokens(service: Running, client: httpx.Client,
+                                                        tmp_path) -> None:
+    import csv
+    import subprocess
+    import sys
+
+    roster = tmp_path / "more.csv"
+    roster.write_text("id,name,email\nfrank,Frank,frank@example.edu\nbob,Bob B.,bob@example.edu\n")
+    tokens = tmp_path / "new-tokens.csv"
+    run = subprocess.run([sys.executable, "-m", "autograder", "roster", str(service.server.course),
+                          str(roster), "--database", service.server.database, "--tokens", str(tokens)],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert "Imported 2 people" in run.stdout and str(tokens) in run.stdout
+    rows = list(csv.DictReader(tokens.open()))
+    assert [r["id"] for r in rows] == ["frank"]  # bob keeps the token he has
+    assert oct(tokens.stat().st_mode & 0o777) == "0o600"
+    assert client.get(f"{service.url}/assignments",
+                      headers=bearer(rows[0]["token"])).status_code == 200
+    with service.engine.connect() as db:
+        stored_hash = db.execute(text("SELECT token_hash FROM users WHERE id = 'frank'")).scalar_one()
+    assert rows[0]["token"] not in stored_hash and len(stored_hash) == 64
+    # the instructor's download: only people without a token get one ("missing")
+    answer = client.post(f"{service.url}/instructor/tokens", data={"scope": "missing"},
+                         headers={"Authorization": f"Bearer {service.tokens['prof']}"})
+    assert answer.status_code == 200 and answer.headers["content-type"].startswith("text/csv")
+    assert answer.text.strip() == "id,name,email,role,token"

@@ -65,6 +65,7 @@ def test_300_uploads_sigkill_and_restart_each_graded_once(database: Callable[[st
     lock = threading.Lock()
     killed = threading.Event()
     restarted = threading.Event()
+    orphans: list[int] = []  # the killed service's grading processes: they must not outlive it
 
     def send(index: int) -> None:
         student = f"s{index % STUDENTS:02d}"
@@ -78,7 +79,7 @@ def test_300_uploads_sigkill_and_restart_each_graded_once(database: Callable[[st
                     acked[answer.json()["id"]] = student
                     if len(acked) >= KILL_AFTER and not killed.is_set():
                         killed.set()
-                        server.kill()
+                        orphans.extend(server.kill())
                         server.start()
                         restarted.set()
                 return
@@ -106,6 +107,8 @@ def test_300_uploads_sigkill_and_restart_each_graded_once(database: Callable[[st
         engine.dispose()
     finally:
         server.stop()
+    assert orphans and not [pid for pid in orphans if support.alive(pid)], \
+        "grading processes of the killed service are still running"
     assert left == 0, f"{left} jobs still waiting after 15 minutes"
     assert len(acked) == STUDENTS * PER_STUDENT
     for sub_id, student in acked.items():  # nothing acknowledged was lost or mixed up

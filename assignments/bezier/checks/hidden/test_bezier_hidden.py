@@ -29,8 +29,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BPoly
 
-from reference import bezier as reference_bezier
-from reference import split as reference_split
+from reference import bezier as reference_bezier, split as reference_split
 
 
 import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run

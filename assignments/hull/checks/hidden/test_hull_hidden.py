@@ -28,8 +28,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from autograder.compare import same_cycle
-from reference import convex_hull as reference_hull
-from reference import orient2d
+from reference import convex_hull as reference_hull, orient2d
 
 
 import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
@@ -275,6 +274,7 @@ class PinSet:
     build: Callable[[np.random.Generator], np.ndarray]
     weight: int
     scipy_unique: bool = False  # well conditioned: scipy must find the same hull
+    degenerate: bool = False    # a stub can answer it: earned only with a general hull
 
 
 DATASETS = {
@@ -282,10 +282,10 @@ DATASETS = {
     "kettner-near-collinear": PinSet(_kettner_near_collinear, 2),
     "grid-5x5": PinSet(_grid_5x5, 2, scipy_unique=True),
     "duplicates": PinSet(_duplicates, 1, scipy_unique=True),
-    "all-collinear": PinSet(_all_collinear, 1),
-    "single-point": PinSet(_single_point, 1),
-    "two-points": PinSet(_two_points, 1),
-    "same-place": PinSet(_same_place, 1),
+    "all-collinear": PinSet(_all_collinear, 1, degenerate=True),
+    "single-point": PinSet(_single_point, 1, degenerate=True),
+    "two-points": PinSet(_two_points, 1, degenerate=True),
+    "same-place": PinSet(_same_place, 1, degenerate=True),
     "square-with-interior": PinSet(_square_with_interior, 1, scipy_unique=True),
     "large-2000": PinSet(_large_2000, 2, scipy_unique=True),
     "unseen-circle": PinSet(_unseen_circle, 1),
@@ -339,5 +339,7 @@ def test_convex_hull(student, credit, rng, name):
     dataset = DATASETS[name]
     points = dataset.build(rng)
     expected, boundary = oracle(points, scipy_unique=dataset.scipy_unique)
+    if dataset.degenerate:
+        feedback.require_general_case(student.convex_hull, f"{name} case")
     got = student.convex_hull(points)
     feedback.grade_hull(got, points, expected, boundary, credit)

@@ -13,17 +13,20 @@ An orientation check calls :func:`judge_turn` for each triple.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from autograder.compare import (
+from autograder.checks import (
     CheckFailure,
+    Credit,
     describe,
     expect_array,
     expect_int,
     is_rotation_reversed,
     same_cycle,
+    sentence,
+    show_point,
 )
 
 #: fraction of a check's points kept for each convention broken (multiplied together)
@@ -46,10 +49,6 @@ def canonical_indices(points: np.ndarray) -> np.ndarray:
 
 def _at(points: np.ndarray, i: int) -> str:
     return f"point {i} at {show_point(points[i])}"
-
-
-def _sentence(text: str) -> str:
-    return text[:1].upper() + text[1:] + "."
 
 
 def _as_indices(got: Any, n: int) -> list[int]:
@@ -119,7 +118,7 @@ def judge_hull(got: Any, points: np.ndarray, expected: Sequence[int],
                            f"{expected[0]}): smallest x, then smallest y")
 
     fraction = float(np.prod([FRACTIONS[k] for k in issues])) if issues else 1.0
-    return fraction, (_sentence("; ".join(issues.values())) if issues else "")
+    return fraction, (sentence("; ".join(issues.values())) if issues else "")
 
 
 def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int],
@@ -135,12 +134,17 @@ def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int]
     if inside:
         parts.append(f"{_at(points, inside[0])} is not on the hull's boundary, so it is not "
                      "a corner" + (f" ({len(inside)} such pins)" if len(inside) > 1 else ""))
+    middle = [v for v in collapsed if v in on_boundary and v not in set(expected)]
+    if missing and middle:
+        parts.append(f"you returned {_at(points, middle[0])}, which lies on the boundary "
+                     "between two corners (in the middle of an edge), so it is not a corner"
+                     + (f" ({len(middle)} such pins)" if len(middle) > 1 else ""))
     if parts:
         raise CheckFailure(f"Expected {len(expected)} hull vertices, got {got_len}; "
                            + "; ".join(parts) + ".")
     twice = next((v for v in collapsed if collapsed.count(v) > 1), None)
     if twice is not None and len(expected) > 2:
-        raise CheckFailure(_sentence(f"{_at(points, twice)} appears {collapsed.count(twice)} "
+        raise CheckFailure(sentence(f"{_at(points, twice)} appears {collapsed.count(twice)} "
                                      "times in your hull; the band passes each corner once"))
 
 
@@ -170,28 +174,57 @@ def _check_order(collapsed: list[int], order: list[int], points: np.ndarray,
 
 
 def grade_hull(got: Any, points: np.ndarray, expected: Sequence[int],
-               boundary: Sequence[int], credit: Any) -> None:
+               boundary: Sequence[int], credit: Credit) -> None:
     """Judge the answer and end the check: pass, ``credit.partial(...)``, or CheckFailure."""
     fraction, message = judge_hull(got, points, expected, boundary)
     if fraction < 1.0:
         credit.partial(fraction, message)
 
 
+#: A general pin set, small enough to check by hand: degenerate cases (one pin, pins in
+#: one place or on one line) earn points only for a convex_hull that gets it right.
+GENERAL_POINTS = np.array([[0.0, 0.0], [4.0, 0.0], [1.0, 1.0], [4.0, 3.0], [2.0, 4.0],
+                           [0.0, 3.0], [2.0, 2.0]])
+GENERAL_HULL = [0, 1, 3, 4, 5]
+
+
+def require_general_case(hull: Callable[[np.ndarray], Any], what: str) -> None:
+    """Fail unless ``hull`` finds the hull of :data:`GENERAL_POINTS` (up to conventions).
+
+    A degenerate case is answered right by many stubs (``return [0]``, a constant list);
+    its points are earned only by a function that also solves the general case.
+    """
+    try:
+        judge_hull(hull(GENERAL_POINTS.copy()), GENERAL_POINTS, GENERAL_HULL, GENERAL_HULL)
+    except CheckFailure as exc:
+        raise CheckFailure(
+            f"The {what} earns points only when convex_hull also finds the hull of a "
+            f"general set of pins, and on {show_point(GENERAL_POINTS[0])}, ..., "
+            f"{show_point(GENERAL_POINTS[-1])} ({len(GENERAL_POINTS)} pins) it does not: "
+            f"{exc}") from None
+
+
 TURN_WORDS = {1: "a left turn (counter-clockwise)", -1: "a right turn (clockwise)",
               0: "no turn (they are collinear)"}
 
 
-def show_point(p: Any) -> str:
-    """A point written so that pasting it back gives exactly the same floats."""
-    return "(" + ", ".join(_show_number(float(c)) for c in p) + ")"
-
-
-def _show_number(c: float) -> str:
-    return repr(int(c)) if c.is_integer() and abs(c) < 2.0**53 else repr(c)
-
-
 def _signed(value: int) -> str:
     return f"{value:+d}" if value else "0"
+
+
+def require_general_turns(orientation: Callable[..., Any], what: str) -> None:
+    """Fail unless ``orientation`` gets a left and a right turn right.
+
+    ``return 0`` answers every collinear triple; collinear cases are earned only by a
+    function that also tells the two turns apart.
+    """
+    for p, q, r, expected in (((0, 0), (1, 0), (0, 1), 1), ((0, 0), (0, 1), (1, 0), -1),
+                              ((1, 1), (4, 2), (2, 5), 1), ((3, 3), (5, 1), (1, 0), -1)):
+        try:
+            judge_turn(orientation(p, q, r), p, q, r, expected)
+        except CheckFailure as exc:
+            raise CheckFailure(f"The {what} earn points only when orientation also tells "
+                               f"left turns from right turns, and it does not: {exc}") from None
 
 
 def judge_turn(got: Any, p: Any, q: Any, r: Any, expected: int, *, hint: str = "") -> None:

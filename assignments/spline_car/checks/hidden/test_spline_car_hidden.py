@@ -21,8 +21,7 @@ import numpy as np
 import pytest
 
 from autograder.compare import CheckFailure, describe
-from reference import car
-from reference import CubicSpline
+from reference import CubicSpline, car
 
 
 import spline_feedback as judge  # checks/public/spline_feedback.py: on sys.path while checks run

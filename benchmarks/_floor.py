@@ -1,0 +1,118 @@
+"""The bare floor: student cells and the same pytest checks in one warm process, no isolation.
+
+Usage (by ``engine_vs_peers.py``): ``python benchmarks/_floor.py ASSIGNMENT [--public-only]
+NOTEBOOK...``. Imports and collection happen once; then, for every notebook, its
+code cells run in a fresh namespace (IPython's transformer turns magics into
+Python, no kernel) and every collected check item runs against that namespace
+through pytest's own per-item protocol, with the ``student``, ``credit``, ``rng``
+and ``feedback`` fixtures reduced to direct calls. Nothing crosses a process,
+nothing is sandboxed, nothing is written: what is left is the student's code and
+the checks' own work, the least any grader must spend. Prints one JSON line:
+the CPU and wall seconds of the per-notebook loop, and each notebook's score.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import types
+import zlib
+from pathlib import Path
+from typing import Any
+
+import autograder  # first: it keeps jsonschema's slow optional IRI grammar out (see there)
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import nbformat  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from _pytest.runner import runtestprotocol  # noqa: E402
+from IPython.core.inputtransformer2 import TransformerManager  # noqa: E402
+
+from autograder.assignment import load_assignment  # noqa: E402
+from autograder.plugin import Credit, check_name, item_points  # noqa: E402
+
+
+class _Feedback:
+    def image(self, label: str, png: bytes) -> None:
+        pass
+
+
+class FloorPlugin:
+    """Collects the check items once; runs them for each notebook in ``pytest_runtestloop``."""
+
+    def __init__(self, notebooks: list[Path], workdir: Path) -> None:
+        self.notebooks, self.workdir = notebooks, workdir
+        self.namespace: dict[str, Any] = {}
+        self.scores: list[float] = []
+        self.cpu = self.wall = 0.0
+
+    def pytest_configure(self, config: pytest.Config) -> None:
+        config.addinivalue_line("markers", "points(n): points awarded by this check item")
+
+    @pytest.fixture
+    def student(self) -> types.SimpleNamespace:
+        return types.SimpleNamespace(**self.namespace, figures=lambda: [])
+
+    @pytest.fixture
+    def credit(self) -> Credit:
+        return Credit()
+
+    @pytest.fixture
+    def rng(self, request: pytest.FixtureRequest) -> np.random.Generator:
+        name, _ = check_name(request.node)
+        return np.random.default_rng([0, zlib.crc32(name.encode())])
+
+    @pytest.fixture
+    def feedback(self) -> _Feedback:
+        return _Feedback()
+
+    def pytest_runtestloop(self, session: pytest.Session) -> bool:
+        transform = TransformerManager().transform_cell
+        sources = [[transform(c.source) for c in nbformat.read(p, as_version=4).cells
+                    if c.cell_type == "code"] for p in self.notebooks]
+        os.chdir(self.workdir)
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        for cells in sources:
+            self.namespace = {"__name__": "__main__"}
+            for code in cells:
+                try:
+                    exec(compile(code, "<cell>", "exec"), self.namespace)
+                except Exception:
+                    pass  # a cell that raises is skipped, as the engine does
+            plt.close("all")
+            score = 0.0
+            for item in session.items:
+                reports = runtestprotocol(item, nextitem=None, log=False)
+                if all(r.passed for r in reports):
+                    score += item_points(item)
+            self.scores.append(score)
+        self.cpu, self.wall = time.process_time() - cpu0, time.perf_counter() - wall0
+        return True
+
+
+def main(argv: list[str]) -> int:
+    public_only = "--public-only" in argv
+    args = [a for a in argv if a != "--public-only"]
+    assignment = load_assignment(Path(args[0]))
+    checks = assignment.root / "checks"
+    files = sorted((checks / "public").glob("test_*.py"))
+    if not public_only:
+        files += sorted((checks / "hidden").glob("test_*.py"))
+    plugin = FloorPlugin([Path(a).resolve() for a in args[1:]], assignment.root)
+    sys.path.insert(0, str(checks / "public"))
+    code = pytest.main([str(f) for f in files] + [
+        "-c", os.devnull, "--rootdir", str(assignment.root), "--confcutdir", str(assignment.root),
+        "-p", "no:cacheprovider", "-p", "no:terminal", "--assert=plain",
+        "--import-mode=importlib"], plugins=[plugin])
+    print(json.dumps({"cpu": plugin.cpu, "wall": plugin.wall, "scores": plugin.scores,
+                      "pytest_exit": int(code)}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
