@@ -344,9 +344,9 @@ def _submit(args: argparse.Namespace) -> int:
 
 def _say_missing_protections() -> None:
     """Say once, before grading, which protections this machine cannot give."""
-    from autograder.sandbox import probe_support
+    from autograder import sandbox
 
-    for note in probe_support().notes:
+    for note in sandbox.probe_support().notes:
         print(f"autograder: note: {note}", file=sys.stderr)
 
 

@@ -744,7 +744,8 @@ def _count_tasks(uid: int) -> int:
 def _apply_identity(policy: IsolationPolicy, workdir: Path, uid: int, notes: list[str]) -> None:
     """As root: an empty network namespace, then a user id of the slot's own."""
     if os.geteuid() != 0:
-        notes.append("network namespace and user switch skipped: not running as root")
+        notes.append("user switch skipped: not running as root (a network namespace only inside a "
+                     "user namespace, see the namespaces note)")
         return
     if policy.network_namespace:
         _attempt(notes, "network namespace", lambda: _unshare(CLONE_NEWNET))

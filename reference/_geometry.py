@@ -208,11 +208,12 @@ def _akl_toussaint(
     certainly strictly inside; doubtful points are kept for the exact stage.
 
     ``rounded=True`` says that ``points`` are the correctly rounded doubles of
-    exact coordinates (integers beyond ``2**53``): each coordinate is then
-    off by at most ``eps M`` (``M`` the largest magnitude), which changes the
-    exact left-of expression ``dx (y - ay) - dy (x - ax)`` (six coordinates,
-    each partial derivative at most ``4 M``) by at most ``24 eps M**2``; a
-    margin of ``32 eps M**2`` is added for it.
+    exact coordinates (integers beyond ``2**53``, translated by an exact
+    integer vector, which changes no hull): each coordinate is then off by at
+    most ``eps M`` (``M`` the largest magnitude), which changes the exact
+    left-of expression ``dx (y - ay) - dy (x - ax)`` (six coordinates, each
+    partial derivative at most ``4 M``) by at most ``24 eps M**2``; a margin
+    of ``32 eps M**2`` is added for it.
     """
     x = points[idx, 0]
     y = points[idx, 1]

@@ -243,13 +243,30 @@ def as_exact_points(
 ) -> tuple[NDArray[Any], NDArray[np.float64]]:
     """Return ``(exact, approx)`` for an ``(n, dim)`` point set.
 
-    ``exact`` is :func:`as_exact_array` of ``value`` and ``approx`` its
-    correctly rounded float64 copy (the same array when ``exact`` is float64).
+    ``exact`` is :func:`as_exact_array` of ``value``. ``approx`` is ``exact``
+    itself when that is float64; for exact objects it is the correctly
+    rounded float64 value of ``exact - origin``, with ``origin`` the integer
+    vector of the columns' floors of their minima, so that its rounding error
+    is relative to the spread of the points rather than to their magnitude
+    (use it only where a translation does not matter: guesses, orderings,
+    filters with a margin).
     """
     exact = as_exact_array(value, name)
     _check_points_shape(exact, name, dim, min_points)
-    approx = exact if exact.dtype != object else exact.astype(np.float64)
-    return exact, approx
+    if exact.dtype != object:
+        return exact, exact
+    if exact.shape[0] == 0:
+        return exact, exact.astype(np.float64)
+    arr = np.asarray(value)
+    if arr.dtype.kind in "iu":
+        # Vectorised: a - min(a) lies in [0, 2**64), exact in uint64 arithmetic
+        # (which wraps modulo 2**64), then correctly rounded to double.
+        low = arr.min(axis=0)
+        diff = arr.astype(np.uint64) - low.astype(np.uint64)
+        return exact, diff.astype(np.float64)
+    origin = [math.floor(min(column)) for column in exact.T.tolist()]
+    shifted = [[float(v - o) for v, o in zip(row, origin)] for row in exact.tolist()]
+    return exact, np.array(shifted, dtype=np.float64).reshape(exact.shape)
 
 
 def as_point(value: ArrayLike, name: str, *, dim: int = 2) -> NDArray[np.float64]:

@@ -164,8 +164,8 @@ def grade_task(plugin_name: str, data: bytes, filename: str, sub_id: str) -> dic
 
 
 def _slot_problem(plugin_name: str, dask_worker: distributed.Worker) -> str:
-    plugin = dask_worker.plugins.get(plugin_name)
-    return "no grading plugin" if plugin is None else getattr(plugin, "problem", "")
+    """Why this worker refused to grade, or "" (also while its plugin is still being set up)."""
+    return getattr(dask_worker.plugins.get(plugin_name), "problem", "")
 
 
 def security_for(tls: TLSFiles | None, *, role: str = "client") -> Security | None:
@@ -251,14 +251,17 @@ class DaskBackend:
                 cluster.close()
 
     @staticmethod
-    def _say_worker_problems(client: Client, name: str) -> None:
-        problems = {w: p for w, p in client.run(_slot_problem, name).items() if p}
-        for problem in problems.values():
+    def _say_worker_problems(client: Client, name: str, *, quiet: bool = False) -> None:
+        """Print why workers refused to grade; fail when every connected worker refused."""
+        answers = client.run(_slot_problem, name, on_error="return")  # a dying worker is no refusal
+        problems = {w: p for w, p in answers.items() if isinstance(p, str) and p}
+        for problem in () if quiet else problems.values():
             print(f"autograder: warning: {problem}", file=sys.stderr)
-        workers = client.scheduler_info()["workers"]
+        workers = client.scheduler_info(n_workers=-1)["workers"]
         if workers and len(problems) == len(workers):
-            raise EngineError("No Dask worker can grade: " + "; ".join(problems.values()))
-        if not workers:
+            raise EngineError("No Dask worker can grade (results so far are kept; fix the workers "
+                              "and run again): " + "; ".join(sorted(set(problems.values()))))
+        if not workers and not quiet:
             print("autograder: note: no Dask worker is connected yet; gradings start when one "
                   "joins (autograder worker ADDRESS --slots N).", file=sys.stderr)
 
@@ -289,6 +292,8 @@ class DaskBackend:
                 done, _ = wait(list(running), timeout=min(5.0, self.spec.warn_after),
                                return_when="FIRST_COMPLETED")
             except TimeoutError:  # no result yet: new workers may have joined; say so when long
+                if grading_slots(client) == 0:
+                    self._say_worker_problems(client, plugin, quiet=True)
                 if time.monotonic() - last >= self.spec.warn_after:
                     print(f"autograder: warning: no result arrived for {time.monotonic() - last:.0f} s; "
                           f"{len(running) + len(queue)} submission(s) still to grade on "

@@ -23,7 +23,7 @@ from autograder.results import SubmissionResult
 from autograder.service.models import Grading, Job, Submission, utcnow
 
 #: seconds a claim lasts without renewal; a grader renews it every third of that
-LEASE_SECONDS = 30.0
+from autograder.service.pool import LEASE_SECONDS  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True)

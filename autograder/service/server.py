@@ -14,7 +14,7 @@ from autograder.service import auth
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions, upgrade
 from autograder.service.models import User
-from autograder.service.workers import GradingPool, WorkerSettings
+from autograder.service.pool import GradingPool, WorkerSettings
 
 
 def open_course(course_path: str | Path, *, database: str | None = None) -> Course:

@@ -4,22 +4,18 @@ Grading is CPU-bound, blocking, and runs pytest in the grading process, so it
 runs in separate processes (never on the web server's event loop or threads).
 Each process keeps one Grader per assignment alive between jobs (rebuilt when
 the assignment's checks change), claims a job, renews the lease from a small
-thread while it grades, and records the result. These processes end when the
-service dies, even by SIGKILL (``PR_SET_PDEATHSIG`` and a thread watching the
-parent), and a killed job's lease runs out and another grader takes it.
+thread while it grades, and records the result. :mod:`autograder.service.pool`
+starts these processes and ties their lives to the service's; a job whose
+grading process died has its lease run out, and another grader takes it.
 """
 
 from __future__ import annotations
 
-import ctypes
-import multiprocessing
 import os
-import signal
+import sys
 import threading
-import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 from autograder.assignment import checks_digest, load_assignment
 from autograder.batch import error_result
@@ -31,19 +27,8 @@ from autograder.service import jobqueue
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions
 from autograder.service.models import Submission
+from autograder.service.pool import WorkerSettings
 from autograder.service.storage import Storage
-
-_PR_SET_PDEATHSIG = 1
-
-
-@dataclass(frozen=True)
-class WorkerSettings:
-    """What a grading process needs (picklable: it crosses a ``spawn``)."""
-
-    course_path: str
-    database_url: str
-    lease_seconds: float = jobqueue.LEASE_SECONDS
-    poll_seconds: float = 0.2
 
 
 class _Graders:
@@ -52,6 +37,7 @@ class _Graders:
     def __init__(self, course: Course) -> None:
         self.course = course
         self._held: dict[str, tuple[str, Grader]] = {}
+        self._last: tuple[str, str] | None = None
 
     def get(self, name: str) -> Grader:
         policy = self.course.assignment(name)
@@ -59,6 +45,10 @@ class _Graders:
             raise LookupError(f"assignment {name!r} is no longer in the course file")
         found = load_assignment(policy.spec)
         digest = checks_digest(found.root)
+        if self._last != (name, digest):
+            forget_check_modules([load_assignment(p.spec).root / "checks"
+                                  for p in self.course.assignments])
+            self._last = (name, digest)
         held = self._held.get(name)
         if held is not None and held[0] == digest:
             return held[1]
@@ -74,11 +64,21 @@ class _Graders:
         self._held.clear()
 
 
-def _die_with_parent() -> None:
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):  # not Linux: the parent check in the loop still ends us
-        pass
+def forget_check_modules(folders: Sequence[Path]) -> None:
+    """Drop imported check modules, so the next run imports the checks on disk now.
+
+    The engine runs checks with pytest's ``--import-mode=importlib``, which names
+    a check module by its path inside the assignment (``checks.hidden.test_hull_hidden``)
+    and reuses a module of that name already in ``sys.modules``. In a process that
+    lives on (this one) an edited check, or another assignment's file of the same
+    name, would otherwise run the old code. Called when the assignment or its
+    checks change, so a steady stream of one assignment keeps its warm modules.
+    """
+    prefixes = tuple(f"{folder.resolve()}{os.sep}" for folder in folders)
+    for name, module in list(sys.modules.items()):
+        origin = getattr(module, "__file__", None) or ""
+        if name == "checks" or name.startswith("checks.") or origin.startswith(prefixes):
+            del sys.modules[name]
 
 
 def grade_job(graders: _Graders, storage: Storage, submission: Submission,
@@ -113,22 +113,6 @@ def _error(submission: Submission, notebook: Path, exc: BaseException) -> Submis
                                 execution_time=0.0, seed=0)
 
 
-def _watch_parent(parent: int, graders: _Graders) -> None:
-    """End this process when the service is gone (SIGKILL included).
-
-    ``PR_SET_PDEATHSIG`` alone is not enough: the kernel clears it when a process's
-    credentials change, which the engine may do while setting up a slot. So this
-    thread also watches the parent id; it stops the warm workers (for a few
-    seconds at most) and exits.
-    """
-    while os.getppid() == parent:
-        time.sleep(0.5)
-    closer = threading.Thread(target=graders.close, daemon=True)
-    closer.start()
-    closer.join(5)
-    os._exit(1)
-
-
 def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: WorkerSettings,
                 stop: threading.Event) -> None:
     while not stop.wait(settings.lease_seconds / 3):
@@ -136,17 +120,17 @@ def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: WorkerSettings,
             return
 
 
-def worker_main(settings: WorkerSettings, stop: Any, name: str) -> None:
-    """The loop of one grading process: claim, grade, record, until ``stop`` is set."""
-    _die_with_parent()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the service; it stops us
-    parent = os.getppid()
+def worker_main(settings: WorkerSettings, stop: Any, name: str, parent: int) -> None:
+    """The loop of one grading process: claim, grade, record, until ``stop`` is set.
+
+    Started through :func:`autograder.service.pool.worker_entry`, which has already
+    tied this process's life to the service's (``parent``).
+    """
     course = load_course(settings.course_path)
     engine = make_engine(settings.database_url)
     factory = sessions(engine)
     storage = Storage(course.data_dir)
     graders = _Graders(course)
-    threading.Thread(target=_watch_parent, args=(parent, graders), daemon=True).start()
     try:
         while not stop.is_set() and os.getppid() == parent:
             job = jobqueue.claim(factory, lease_seconds=settings.lease_seconds)
@@ -168,49 +152,6 @@ def worker_main(settings: WorkerSettings, stop: Any, name: str) -> None:
                 halt.set()
                 keeper.join()
             jobqueue.finish(factory, job, result, folder, worker=name, max_tries=course.max_tries)
-            _die_with_parent()  # again: grading may have changed credentials, which clears it
     finally:
         graders.close()
         engine.dispose()
-
-
-class GradingPool:
-    """``jobs`` grading processes pulling from the database queue."""
-
-    def __init__(self, settings: WorkerSettings, jobs: int) -> None:
-        self.settings = settings
-        self.jobs = jobs
-        self._context = multiprocessing.get_context("spawn")
-        self._stop = self._context.Event()
-        self._procs: list[Any] = []
-        self._watch: threading.Thread | None = None
-        self._closing = threading.Event()
-
-    def start(self) -> None:
-        for index in range(self.jobs):
-            self._procs.append(self._spawn(index))
-        self._watch = threading.Thread(target=self._restart_dead, daemon=True)
-        self._watch.start()
-
-    def _spawn(self, index: int) -> Any:
-        proc = self._context.Process(target=worker_main, name=f"grader-{index}", daemon=True,
-                                     args=(self.settings, self._stop, f"{os.getpid()}-{index}"))
-        proc.start()
-        return proc
-
-    def _restart_dead(self) -> None:
-        """A grading process that died (the machine ran out of memory, say) is replaced."""
-        while not self._closing.wait(1.0):
-            for index, proc in enumerate(self._procs):
-                if not proc.is_alive() and not self._closing.is_set():
-                    self._procs[index] = self._spawn(index)
-
-    def stop(self, timeout: float = 30.0) -> None:
-        self._closing.set()
-        self._stop.set()
-        deadline = time.monotonic() + timeout
-        for proc in self._procs:
-            proc.join(max(0.1, deadline - time.monotonic()))
-            if proc.is_alive():
-                proc.kill()
-                proc.join(5)

@@ -25,6 +25,7 @@ grader turns into a "forbidden" verdict with the assignment's reason.
 
 from __future__ import annotations
 
+import importlib
 import sys
 import types
 from collections.abc import Iterable, Sequence
@@ -71,18 +72,23 @@ def forbid(names: Sequence[str], *, internal_use: Sequence[str] = (), reason: st
     # the static scan's verdict is the rule (said in the assignment's toml).
     kept = tuple(internal_use)
     prefixes = tuple(name for name in names if not _matches(name, kept))
+    for name in prefixes:  # load what exists, so that it can be blocked in place
+        try:
+            importlib.import_module(name)
+        except Exception:  # not installed, an attribute, or fails to import: nothing to load
+            pass
     modules, objects = _targets(prefixes)
-    poison = {id(obj): name for name, obj in {**modules, **objects}.items()}
-    replaced = _replace_aliases(poison, set(modules), reason)
-    for name in sorted(modules, key=len, reverse=True):
-        sys.modules.pop(name, None)
-        _set_on_parent(name, None)
+    # Loaded forbidden modules stay loaded (allowed code may import them at call time,
+    # as matplotlib's Triangulation does with its qhull module even when it is given
+    # the triangles): their classes and functions are blocked in place instead, so
+    # every route to the module object finds only stand-ins.
+    poison = {id(obj): name for name, obj in objects.items()}
+    replaced = _replace_aliases(poison, set(), reason)
     for name in objects:
-        if name.rpartition(".")[0] not in modules:
-            _set_on_parent(name, Blocked(name, reason))
+        _set_on_parent(name, Blocked(name, reason))
     sys.addaudithook(_audit_hook(prefixes, reason))
-    return [f"forbidden at run time: {', '.join(prefixes)} ({len(modules)} modules unloaded, "
-            f"{replaced} aliases blocked)"]
+    return [f"forbidden at run time: {', '.join(prefixes)} ({len(modules)} loaded modules "
+            f"blocked in place, {replaced} references replaced)"]
 
 
 def _matches(name: str, prefixes: tuple[str, ...]) -> bool:
@@ -103,10 +109,13 @@ def _targets(prefixes: tuple[str, ...]) -> tuple[dict[str, types.ModuleType], di
                 modules[entry] = value
             else:
                 objects[entry] = value
-    for name, module in modules.items():  # what those modules define, wherever it is kept
+    for name, module in modules.items():  # the classes and functions they define
         for attr, value in list(vars(module).items()):
-            if (isinstance(value, type) or callable(value)) and \
-                    _matches(str(getattr(value, "__module__", "") or ""), prefixes):
+            if not callable(value) or isinstance(value, types.ModuleType):
+                continue
+            home = str(getattr(value, "__module__", "") or "")
+            # C functions of an extension module name the module as their __self__.
+            if _matches(home, prefixes) or getattr(value, "__self__", None) is module:
                 objects.setdefault(f"{name}.{attr}", value)
     return modules, objects
 

@@ -77,3 +77,17 @@ def test_example_scores_in_its_band(graded: dict[str, Path], name: str, stem: st
     text = json.dumps(result)
     for word in expected.get("contains", []):
         assert word in text, f"{name}/{stem}: the feedback never says {word!r}"
+
+
+@pytest.mark.parametrize("name", ASSIGNMENTS)
+def test_released_checks_never_import_the_model_solutions(name: str) -> None:
+    """`reference` is not part of a student's install: public checks and helpers do without it."""
+    import ast
+
+    for path in (ROOT / "assignments" / name / "checks" / "public").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            assert not any(n == "reference" or n.startswith("reference.") for n in names), (
+                f"{path.relative_to(ROOT)} imports {names}: use stored answers, SciPy, or logic "
+                "written in the checks")

@@ -64,6 +64,15 @@ def repo(workspace: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
+def cache(workspace: Path) -> Path:
+    """One pip cache for every venv and user of the run: wheels are downloaded once."""
+    path = workspace / "pip-cache"
+    path.mkdir(mode=0o777)
+    path.chmod(0o777)
+    return path
+
+
+@pytest.fixture(scope="module")
 def expected(workspace: Path) -> dict[str, dict[str, float]]:
     """The scores the developer's own install gives."""
     out = workspace / "baseline"
@@ -88,29 +97,24 @@ def grade_with(env: envs.Env, assignment: str, folder: Path, *, cwd: Path) -> di
     return scores(out)
 
 
-def test_venv_inside_the_repository(repo: Path, expected: dict[str, dict[str, float]]) -> None:
-    env = envs.make_venv(repo / ".venv", install=["-e", str(repo), "-e", str(repo / "reference")])
+def test_venv_inside_the_repository(repo: Path, cache: Path,
+                                    expected: dict[str, dict[str, float]]) -> None:
+    """``python -m venv .venv`` in the checkout, numpy and the rest inside it."""
+    env = envs.make_venv(repo / ".venv", install=["-e", str(repo), "-e", str(repo / "reference")],
+                         cache=cache)
     assert grade_with(env, "hull", repo / "class", cwd=repo) == expected
 
 
-def test_venv_beside_the_repository(repo: Path, workspace: Path,
+def test_venv_beside_the_repository(repo: Path, workspace: Path, cache: Path,
                                     expected: dict[str, dict[str, float]]) -> None:
-    env = envs.make_venv(workspace / "venv-beside",
-                         install=["-e", str(repo), "-e", str(repo / "reference")])
+    """A venv next to the checkout (the libraries from the base Python: only the place differs)."""
+    env = envs.make_venv(workspace / "venv-beside", stack=False, system_site=True, cache=cache,
+                         install=["--no-deps", "-e", str(repo), "-e", str(repo / "reference")])
     assert grade_with(env, "hull", workspace / "beside", cwd=workspace) == expected
 
 
-def test_installed_package_with_an_assignment_folder_outside(
-        repo: Path, workspace: Path, expected: dict[str, dict[str, float]]) -> None:
-    """``pip install .`` (not editable) and the assignment given by its path."""
-    env = envs.make_venv(workspace / "venv-wheel", install=[str(repo), str(repo / "reference")])
-    course = workspace / "elsewhere"
-    shutil.copytree(repo / "assignments" / "hull", course / "hull",
-                    ignore=shutil.ignore_patterns("examples"))
-    assert grade_with(env, str(course / "hull"), course, cwd=course) == expected
-
-
-def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, workspace: Path) -> None:
+def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, workspace: Path,
+                                                              cache: Path) -> None:
     """The student's install (no model solutions) next to the released folder."""
     course = workspace / "student"
     released = course / "hull"
@@ -118,7 +122,7 @@ def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, worksp
                            str(released)], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     shutil.copy(EXAMPLES / "solution.ipynb", released / "hull.ipynb")
-    env = envs.make_venv(course / "venv", install=[str(repo)])
+    env = envs.make_venv(course / "venv", install=[str(repo)], cache=cache)
     probe = env.run("python", "-c", "import reference")
     assert probe.returncode != 0, "the student's install must not contain the model solutions"
     proc = env.run("autograder", "check", "hull/hull.ipynb", cwd=course)
@@ -127,7 +131,7 @@ def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, worksp
 
 
 def test_gradescope_zip_installed_by_its_own_setup_script(
-        workspace: Path, expected: dict[str, dict[str, float]]) -> None:
+        workspace: Path, cache: Path, expected: dict[str, dict[str, float]]) -> None:
     """setup.sh and run_autograder exactly as Gradescope runs them, under a fake /autograder."""
     root = workspace / "gradescope"
     proc = subprocess.run([sys.executable, "-m", "autograder", "gradescope", "hull", "--out",
@@ -141,7 +145,7 @@ def test_gradescope_zip_installed_by_its_own_setup_script(
     assert "### BEGIN SOLUTION" not in bundled, "the zip must not hold the instructor notebook"
     for script in ("setup.sh", "run_autograder"):
         (root / "source" / script).chmod(0o755)
-    env = {"AUTOGRADER_ROOT": str(root)}
+    env = {"AUTOGRADER_ROOT": str(root), "PIP_CACHE_DIR": str(cache)}
     setup = subprocess.run(["bash", str(root / "source" / "setup.sh")], capture_output=True,
                            text=True, timeout=envs.INSTALL_TIMEOUT,
                            env={**os.environ, **env}, cwd=root / "source")
@@ -159,20 +163,32 @@ def test_gradescope_zip_installed_by_its_own_setup_script(
         assert {t["name"]: t["score"] for t in data["tests"]} == expected[name]
 
 
-def test_ordinary_user_with_debians_python(repo: Path, workspace: Path,
-                                           expected: dict[str, dict[str, float]]) -> None:
-    """Not root, another Python (Debian's 3.11), a non-editable install in the user's home."""
-    reason = envs.can_switch_users()
-    if reason is not None:
-        pytest.skip(f"ordinary-user layout not tested: {reason}")
-    if not Path("/usr/bin/python3").exists():
-        pytest.skip("ordinary-user layout not tested: Debian's /usr/bin/python3 is missing")
-    user = envs.ordinary_user()
-    venv = Path(envs.home(user)) / "numgrade-venv"
-    if not (venv / "bin" / "autograder").exists():
-        envs.make_venv(venv, install=[str(repo), str(repo / "reference")],
-                       python="/usr/bin/python3", user=user)
-    env = envs.Env(python=venv / "bin" / "python", user=user)
+def test_ordinary_user_installed_package_assignment_outside(
+        repo: Path, workspace: Path, cache: Path, expected: dict[str, dict[str, float]]) -> None:
+    """``pip install .`` (not editable) by an ordinary user with Debian's Python 3.11, the
+    assignment folder given by its path, outside any checkout.
+
+    Run as root, the test creates the user; otherwise it runs as the current user
+    (still not root) with this interpreter.
+    """
+    debian = Path("/usr/bin/python3")
+    user = None
+    if envs.can_switch_users() is None and debian.exists():
+        user = envs.ordinary_user()
+        venv = Path(envs.home(user)) / "numgrade-venv"
+        python = str(debian)
+    elif os.geteuid() != 0:
+        venv, python = workspace / "venv-wheel", sys.executable
+    else:
+        pytest.skip(f"ordinary-user layout not tested: {envs.can_switch_users() or 'no /usr/bin/python3'}")
+    if venv.exists():
+        shutil.rmtree(venv)
+    subprocess.run(["chmod", "-R", "a+rwX", str(cache)], check=False)  # root filled it so far
+    env = envs.make_venv(venv, install=[str(repo), str(repo / "reference")], python=python,
+                         user=user, cache=cache)
+    probe = env.run("python", "-c", "import os, autograder; print(os.geteuid(), autograder.__file__)")
+    assert probe.returncode == 0 and not probe.stdout.startswith("0 "), probe.stdout + probe.stderr
+    assert "site-packages" in probe.stdout  # the installed copy, not the checkout
     course = workspace / "user-course"
     shutil.copytree(repo / "assignments" / "hull", course / "hull",
                     ignore=shutil.ignore_patterns("examples"))

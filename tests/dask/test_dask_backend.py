@@ -112,7 +112,7 @@ def test_dask_gives_the_grades_of_the_local_pool(submissions: list[Path], tmp_pa
                       progress=False)
     remote = api.grade("hull", submissions, out=tmp_path / "dask", dask="local:2", options=OPTIONS,
                        progress=False)
-    assert not local.failed and not remote.failed
+    assert not local.failed and not remote.failed, [r.output for r in local.failed + remote.failed]
     assert (tmp_path / "dask" / "grades.csv").read_text() == (tmp_path / "local" / "grades.csv").read_text()
     assert (tmp_path / "dask" / "summary.json").read_text() == (tmp_path / "local" / "summary.json").read_text()
     for result in remote.results:  # the client wrote every file, with its own paths and keys

@@ -62,10 +62,13 @@ def exact_hull(points) -> list[int]:
         if not uniq or pts[uniq[-1]] != pts[i]:
             uniq.append(i)
 
+    def left(a, b, c):  # integer orientation determinant > 0
+        return (a[0] - c[0]) * (b[1] - c[1]) - (a[1] - c[1]) * (b[0] - c[0]) > 0
+
     def chain(seq):
         out = []
         for i in seq:
-            while len(out) >= 2 and exact_orient(pts[out[-2]], pts[out[-1]], pts[i]) <= 0:
+            while len(out) >= 2 and not left(pts[out[-2]], pts[out[-1]], pts[i]):
                 out.pop()
             out.append(i)
         return out
@@ -146,6 +149,23 @@ def test_convex_hull_python_ints_beyond_int64():
     want = exact_hull(big)
     for method in ("monotone", "jarvis"):
         assert convex_hull(big, method=method).tolist() == want
+
+
+def test_convex_hull_prefilter_on_rounded_int64_keeps_every_vertex():
+    # > 2048 points: both prefilter passes run on the rounded, translated
+    # coordinates. The bottom edge bulges by at most 400 units (doubles near
+    # 2**62 are 1024 apart), so each of its 41 points is a vertex only exactly.
+    rng = np.random.default_rng(5)
+    inner = rng.integers(-2**40, 2**40, size=(3000, 2))
+    corners = np.array([[-2**41, -2**41], [2**41, -2**41], [2**41, 2**41], [-2**41, 2**41]])
+    edge = np.c_[np.linspace(-2**41, 2**41, 41).astype(np.int64), np.full(41, -2**41)]
+    k = np.arange(41)
+    edge[:, 1] -= k * (40 - k)
+    pts = np.vstack([inner, corners, edge]).astype(np.int64) + BIG
+    want = exact_hull(pts.tolist())
+    assert len(want) == 43
+    for method in ("monotone", "jarvis"):
+        assert convex_hull(pts, method=method).tolist() == want
 
 
 def _triangle_set(tri) -> set[tuple[int, ...]]:

@@ -43,8 +43,8 @@ class Env:
         return self.python.parent
 
     def command(self, *args: str) -> list[str]:
-        """argv for running ``args[0]`` from this environment, as its user."""
-        argv = [str(self.bin / args[0]), *args[1:]]
+        """argv for running ``args[0]`` from this environment (or a path), as its user."""
+        argv = [args[0] if "/" in args[0] else str(self.bin / args[0]), *args[1:]]
         if self.user is None:
             return argv
         return ["runuser", "-u", self.user, "--", "env", f"HOME={home(self.user)}",
@@ -79,13 +79,21 @@ def copy_repository(target: Path) -> Path:
 
 
 def make_venv(where: Path, *, install: list[str], python: str = sys.executable,
-              user: str | None = None, stack: bool = True) -> Env:
-    """A venv at ``where`` with ``pip install *install`` (and the worker's stack inside it)."""
+              user: str | None = None, stack: bool = True, system_site: bool = False,
+              cache: Path | None = None) -> Env:
+    """A venv at ``where`` with ``pip install *install`` (and the worker's stack inside it).
+
+    ``cache`` is a pip cache shared by every venv of a test run (and every user), so
+    the wheels are downloaded once.
+    """
     env = Env(python=where / "bin" / "python", user=user)
-    _run_checked(Env(Path(python), user).command(python, "-m", "venv", str(where))
-                 if user else [python, "-m", "venv", str(where)])
+    venv = [python, "-m", "venv", *(["--system-site-packages"] if system_site else []), str(where)]
+    _run_checked(Env(Path(python), user).command(*venv) if user else venv)
     packages = [*WORKER_STACK] if stack else []
-    _run_checked(env.command("python", "-m", "pip", "install", "-q", *packages, *install))
+    pip = ["python", "-m", "pip", "install", "-q", "--disable-pip-version-check"]
+    if cache is not None:
+        pip += ["--cache-dir", str(cache)]
+    _run_checked(env.command(*pip, *packages, *install))
     return env
 
 

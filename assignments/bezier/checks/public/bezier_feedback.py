@@ -32,7 +32,15 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import BPoly
 
-from autograder.compare import CheckFailure, describe, expect_array
+from autograder.checks import (
+    CheckFailure,
+    Credit,
+    Student,
+    describe,
+    expect_array,
+    show_number,
+    show_point,
+)
 from autograder.errors import CallTimeout, StudentException
 
 #: Share of a check's points kept for each convention broken (multiplied together).
@@ -56,17 +64,25 @@ EXACT_HINTS = {
         "differ from Q in the last bit."),
 }
 
-#: Shown when a call of ``fn`` runs out of time.
-TIMEOUT_HINTS = {
-    "de_casteljau": (
-        "A de_casteljau that calls itself twice per step (once on ctrlpts[:-1] and once on "
-        "ctrlpts[1:]) does about 2**n interpolations: 10**12 for n = 40. Build the triangle "
-        "level by level instead: n (n + 1) / 2 interpolations, each level one numpy "
-        "expression on the previous one."),
-    "split_bezier": (
-        "Compute the de Casteljau triangle once, level by level, and read both pieces off "
-        "it: n (n + 1) / 2 interpolations in all."),
-}
+#: Degree of the probe that tells an exponential recursion (2**20 calls: seconds) from a
+#: slow but polynomial loop (210 interpolations: instant), and its time limit in seconds.
+PROBE_DEGREE = 20
+PROBE_TIMEOUT = 5.0
+
+#: Hints for a call that ran out of time, each shown only when its symptom is measured.
+NEVER_ENDS = ("It does not return even for a single control point (degree 0), where the "
+              "curve is that point for every t: check that your loop over the levels ends "
+              "(n = len(ctrlpts) - 1 levels, none when n = 0).")
+EXPONENTIAL = ("It also runs out of time at degree 20, where the de Casteljau triangle has "
+               "only 210 interpolations: your function does far more work than that, like a "
+               "recursion that calls itself twice per step (about 2**n calls). Build the "
+               "triangle level by level instead, each level one numpy expression on the "
+               "previous one.")
+SLOW_LOOP = ("It returns at small degrees, so the work grows too fast with n: at degree "
+             "{n} the triangle has n (n + 1) / 2 = {work:,} interpolations. Compute each "
+             "level with one numpy expression ((1 - t) * P[:-1] + t * P[1:]) instead of a "
+             "Python loop over its points.")
+
 
 #: How the right pieces of the triangle make the two control polygons.
 SPLIT_HINT = ("The left control points are the first points of the de Casteljau levels, "
@@ -77,19 +93,6 @@ SPLIT_HINT = ("The left control points are the first points of the de Casteljau 
 # ---------------------------------------------------------------------------
 # writing numbers and calls
 # ---------------------------------------------------------------------------
-
-def show_number(value: Any) -> str:
-    """A number written so that pasting it back gives exactly the same double."""
-    value = float(value)
-    return repr(int(value)) if value.is_integer() and abs(value) < 2.0**53 else repr(value)
-
-
-def show_point(p: Any, digits: int | None = None) -> str:
-    """A point, each coordinate exact (``digits=None``) or to ``digits`` significant digits."""
-    if digits is None:
-        return "(" + ", ".join(show_number(c) for c in np.ravel(p)) + ")"
-    return "(" + ", ".join(f"{float(c):.{digits}g}" for c in np.ravel(p)) + ")"
-
 
 #: Significant digits when showing values that are compared with a tolerance.
 DIGITS = 12
@@ -120,7 +123,7 @@ def _sentence(text: str) -> str:
 # calling the student
 # ---------------------------------------------------------------------------
 
-def ask(student: Any, fn: str, ctrl: np.ndarray, t: float, *, hint: str = "",
+def ask(student: Student, fn: str, ctrl: np.ndarray, t: float, *, hint: str = "",
         timeout: float | None = None) -> Any:
     """``student.<fn>(ctrl, t)``; overflow, time-outs and deep recursion come back explained.
 
@@ -139,7 +142,36 @@ def ask(student: Any, fn: str, ctrl: np.ndarray, t: float, *, hint: str = "",
     except CallTimeout:
         raise CheckFailure(
             f"{call_text(fn, ctrl, t)} did not return within the time limit (degree "
-            f"{len(ctrl) - 1}). {TIMEOUT_HINTS.get(fn, '')}".rstrip()) from None
+            f"{len(ctrl) - 1}). {timeout_hint(student, fn, ctrl, t)}".rstrip()) from None
+
+
+def timeout_hint(student: Student, fn: str, ctrl: np.ndarray, t: float) -> str:
+    """Why ``fn`` may have run out of time, from what it does on smaller polygons.
+
+    The hint is measured, never guessed from the dataset: a single control point
+    that also times out is a loop that never ends; degree 20 timing out is
+    exponential work; otherwise the work is polynomial but too slow.
+    """
+    n = len(ctrl) - 1
+
+    def returns(degree: int) -> bool | None:
+        try:
+            student.call(fn, ctrl[:degree + 1].copy(), float(t), timeout=PROBE_TIMEOUT)
+        except CallTimeout:
+            return False
+        except Exception:  # another error, or the call was refused: say nothing
+            return None
+        return True
+
+    if n == 0 or returns(0) is False:
+        return NEVER_ENDS
+    if n > PROBE_DEGREE:
+        probe = returns(PROBE_DEGREE)
+        if probe is False:
+            return EXPONENTIAL
+        if probe is True:
+            return SLOW_LOOP.format(n=n, work=n * (n + 1) // 2)
+    return ""
 
 
 # ---------------------------------------------------------------------------
@@ -155,7 +187,7 @@ class Verdict:
     def note(self, key: str, message: str) -> None:
         self.issues.setdefault(key, message)
 
-    def finish(self, credit: Any) -> None:
+    def finish(self, credit: Credit) -> None:
         """Pass, or end the check with the product of the fractions and every message."""
         if self.issues:
             fraction = float(np.prod([FRACTIONS[k] for k in self.issues]))
@@ -240,6 +272,7 @@ def judge_point(got: Any, expected: np.ndarray, *, fn: str, ctrl: np.ndarray, t:
     err = float(np.max(np.abs(point - expected)))
     if err > atol:
         note = weight_sum_note(point, ctrl[0]) if np.all(ctrl == ctrl[0]) else ""
+        note = note or reversed_note(point, ctrl, t, atol)
         raise CheckFailure(
             f"{call} should be {show_point(expected, DIGITS)}; got {show_point(point, DIGITS)}"
             f"{where} (off by {err:.2e}, allowed {atol:.1e}).{_endpoint_note(t, ctrl)}{note} "
@@ -251,6 +284,24 @@ def _endpoint_note(t: float, ctrl: np.ndarray) -> str:
         return " A Bezier curve starts at its first control point."
     if t == 1.0:
         return " A Bezier curve ends at its last control point."
+    return ""
+
+
+#: Highest degree at which BPoly (the independent oracle) is used to recognise C(1 - t).
+REVERSED_MAX_DEGREE = 40
+REVERSED_HINT = (" Your point is C(1 - t): the curve run backwards, from the last control "
+                 "point to the first. P_i goes with B_{i,n}(t) = C(n, i) t^i (1 - t)^(n - i), "
+                 "and each de Casteljau step is (1 - t) * P_i + t * P_(i+1): the weight t "
+                 "belongs to the later point.")
+
+
+def reversed_note(point: np.ndarray, ctrl: np.ndarray, t: float, atol: float) -> str:
+    """The C(1 - t) hint, when the answer measurably is the curve at 1 - t (and not at t)."""
+    if len(ctrl) - 1 > REVERSED_MAX_DEGREE or t == 0.5 or np.all(ctrl == ctrl[0]):
+        return ""
+    backwards = curve_points(ctrl, 1.0 - t)
+    if np.all(np.isfinite(backwards)) and float(np.max(np.abs(point - backwards))) <= atol:
+        return REVERSED_HINT
     return ""
 
 
@@ -267,8 +318,8 @@ def weight_sum_note(got: Any, point: np.ndarray) -> str:
     ratios = arr / point
     if np.ptp(ratios) < 1e-9 * max(1.0, float(np.max(np.abs(ratios)))) \
             and abs(float(ratios[0]) - 1.0) > 1e-9:
-        return f" Your result is {float(ratios[0]):.6g} times that point: your weights sum to " \
-               f"{float(ratios[0]):.6g}."
+        return f" Your result is {show_number(ratios[0])} times that point: your weights " \
+               f"sum to {show_number(ratios[0])}."
     return ""
 
 
@@ -289,11 +340,16 @@ def judge_endpoint(got: Any, ctrl: np.ndarray, t: float, *, fn: str, atol: float
         verdict.note("inexact-end", f"{message} (off by {err:.1e}: rounding). "
                                     f"{EXACT_HINTS.get(fn, '')}".rstrip())
         return
+    other = ctrl[-1] if t == 0.0 else ctrl[0]
+    backwards = (" You returned the other end: your curve runs backwards, C(1 - t)."
+                 + REVERSED_HINT.split(":", 1)[1].split(".", 1)[1]
+                 if len(ctrl) > 1 and np.array_equal(point, other) else "")
     raise CheckFailure(f"{message}. A Bezier curve starts at its first control point and ends "
-                       "at its last one, because there all Bernstein weights but one are 0.")
+                       "at its last one, because there all Bernstein weights but one are 0."
+                       + backwards)
 
 
-def grade_endpoints(student: Any, credit: Any, fn: str, polygons: Iterable[np.ndarray], *,
+def grade_endpoints(student: Student, credit: Credit, fn: str, polygons: Iterable[np.ndarray], *,
                     rtol: float) -> None:
     """Check ``fn`` at t = 0 and t = 1 on every polygon, then award the verdict."""
     verdict = Verdict()
@@ -442,7 +498,7 @@ def split_picture(ctrl: np.ndarray, t: float, left: np.ndarray, right: np.ndarra
     return buffer.getvalue()
 
 
-def grade_split(student: Any, ctrl: np.ndarray, t: float,
+def grade_split(student: Student, ctrl: np.ndarray, t: float,
                 expected: tuple[np.ndarray, np.ndarray], *, atol: float, verdict: Verdict,
                 picture: Callable[[str, bytes], None] | None = None) -> None:
     """Call ``split_bezier``, judge the answer, attach a picture when it is not right."""

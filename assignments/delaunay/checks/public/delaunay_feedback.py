@@ -25,7 +25,16 @@ from typing import Any
 import numpy as np
 from matplotlib.path import Path
 
-from autograder.compare import CheckFailure, describe, expect_array
+from autograder.checks import (
+    CheckFailure,
+    Credit,
+    Feedback,
+    describe,
+    expect_array,
+    figure_png,
+    sentence,
+    show_point,
+)
 
 #: fraction of a check's points kept for each convention broken (multiplied together)
 FRACTIONS = {
@@ -45,22 +54,8 @@ Judge = Callable[[np.ndarray], tuple[float, list[str]]]
 # writing numbers, points and triangles
 # ---------------------------------------------------------------------------
 
-def show_number(c: float) -> str:
-    """A float written so that pasting it back gives exactly the same double."""
-    c = float(c)
-    return repr(int(c)) if c.is_integer() and abs(c) < 2.0**53 else repr(c)
-
-
-def show_point(p: Any) -> str:
-    return "(" + ", ".join(show_number(c) for c in p) + ")"
-
-
 def show_triangle(t: Sequence[int]) -> str:
     return "(" + ", ".join(str(int(v)) for v in t) + ")"
-
-
-def sentence(text: str) -> str:
-    return text[:1].upper() + text[1:] + ("" if text.endswith(".") else ".")
 
 
 def count_message(expected: int, n: int, hull: int, got: int) -> str:
@@ -77,12 +72,17 @@ def as_triangles(got: Any) -> np.ndarray:
     """The answer as an ``(m, 3)`` int64 array with ``m >= 1``, or CheckFailure."""
     hint = (" Return an (m, 3) array of integer indices into `points`, one row per "
             "triangle, e.g. np.array(triangles, dtype=int).")
+    if isinstance(got, (list, tuple, np.ndarray)) and np.size(got) == 0:
+        raise CheckFailure(
+            f"{NAME} returned {describe(got)} with no triangles in it: the answer is well "
+            "formed but empty, and every set of 3 or more points not all on one line has "
+            "triangles (2n - 2 - h of them). Check that your loop keeps the triangles it "
+            "builds: for example, that removing the triangles that touch the super-triangle "
+            "does not remove them all.")
     try:
         arr = expect_array(got, dtype_kind="iu", name=NAME)
     except CheckFailure as exc:
         raise CheckFailure(f"{exc}{hint}") from None
-    if arr.size == 0:
-        raise CheckFailure(f"{NAME} returned no triangles ({describe(got)}).{hint}")
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise CheckFailure(f"{NAME} should have shape (m, 3); got shape {arr.shape}.{hint}")
     return arr.astype(np.int64)
@@ -129,7 +129,7 @@ def clockwise_note(tri: np.ndarray, clockwise: Sequence[int]) -> str:
             "of every triangle counter-clockwise")
 
 
-def grade_triangulation(got: Any, n: int, judge: Judge, credit: Any) -> None:
+def grade_triangulation(got: Any, n: int, judge: Judge, credit: Credit) -> None:
     """Judge the answer and end the check: pass, ``credit.partial(...)``, or CheckFailure."""
     tri = as_triangles(got)
     try:
@@ -251,7 +251,7 @@ SIGN_HINT = ("Check the sign convention: for counter-clockwise a, b, c the in-ci
 
 
 def judge_in_circle(cases: Sequence[tuple[tuple[Any, ...], Any, int]], *, hint: str = "",
-                    credit: Any) -> None:
+                    credit: Credit) -> None:
     """Judge ``(args, got, where)`` triples; ``where`` is +1 inside, 0 on, -1 outside.
 
     Ends the check: pass, partial credit (answers right but not ``bool``), or
@@ -302,11 +302,6 @@ COLOUR_RANGE_TOL = 0.25
 #: share of sample points (triangle centroids) the filled area must cover
 COVERAGE = 0.95
 MAX_SAMPLES = 400
-
-
-def png_of(figure: Any) -> bytes:
-    png = figure.get("png", b"") if isinstance(figure, dict) else b""
-    return png.tobytes() if isinstance(png, np.ndarray) else bytes(png or b"")
 
 
 def _covered(segments: Sequence[Any], samples: np.ndarray) -> np.ndarray:
@@ -390,15 +385,16 @@ def _check_colours(coloured: list[dict], u: np.ndarray) -> None:
                        "themselves, one value per point.")
 
 
-def grade_figure(student: Any, points: Any, triangles: Any, u: Any, credit: Any,
-                 feedback: Any) -> None:
+def grade_figure(student: Any, points: Any, triangles: Any, u: Any, credit: Credit,
+                 feedback: Feedback) -> None:
     """Call ``plot_on_mesh``, attach its picture, and judge it (figure returned or left open)."""
     value, opened = student.call("plot_on_mesh", points, triangles, u, figures=True)
     figure = value if isinstance(value, dict) and "axes" in value else None
     if figure is None and opened:
         figure = opened[-1]
-    if figure is not None and png_of(figure):
-        feedback.image("your plot_on_mesh", png_of(figure))
+    png = figure_png(figure)
+    if png:
+        feedback.image("your plot_on_mesh", png)
     if value is None and figure is not None:
         judge_figure(figure, points, triangles, u)
         credit.partial(FRACTIONS["no-return"],

@@ -17,7 +17,16 @@ from typing import Any, Callable, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from autograder.compare import CheckFailure, describe, expect_array
+from autograder.checks import (
+    CheckFailure,
+    Credit,
+    Feedback,
+    Student,
+    describe,
+    expect_array,
+    figure_png,
+    show_number,
+)
 from autograder.errors import StudentException
 
 # ---------------------------------------------------------------------------
@@ -71,10 +80,8 @@ CHEBYSHEV_HINT = ("Chebyshev weights need no large numbers: w_j = (-1)^j, halved
                   "and j = n.")
 
 
-def show(value: Any) -> str:
-    """A number written so that pasting it back gives the same double."""
-    value = float(value)
-    return repr(int(value)) if value.is_integer() and abs(value) < 2.0**53 else repr(value)
+#: A number written so that pasting it back gives the same double.
+show = show_number
 
 
 def _sentence(parts: Sequence[str]) -> str:
@@ -111,7 +118,7 @@ def _close(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
     return a.shape == b.shape and bool(np.all(np.abs(a - b) <= atol))
 
 
-def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit: Any,
+def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit: Credit,
                 known: Mapping[str, np.ndarray] | None = None) -> None:
     """Nodes: n + 1 of them, finite, ascending, equal to ``expected`` within ``NODE_ATOL``.
 
@@ -259,7 +266,7 @@ def scale_factor(got: np.ndarray, expected: np.ndarray, off_node: np.ndarray,
 
 
 def judge_values(got: Any, expected: np.ndarray, *, t: np.ndarray, nodes: np.ndarray,
-                 tol: float, call: str, credit: Any) -> None:
+                 tol: float, call: str, credit: Credit) -> None:
     """Values of the interpolant at ``t``: same shape, no NaN, within ``tol`` (absolute)."""
     expected = np.asarray(expected, dtype=float)
     t = np.asarray(t, dtype=float)
@@ -327,7 +334,7 @@ def judge_exact(got: Any, fvals: np.ndarray, nodes: np.ndarray, index: np.ndarra
                 "exactly (not with a tolerance) and return fvals[j] there.")
 
 
-def judge_scalar(got: Any, *, call: str, credit: Any) -> float:
+def judge_scalar(got: Any, *, call: str, credit: Credit) -> float:
     """A scalar ``t`` gives a scalar: a float, or a 0-d array. Returns the value."""
     if isinstance(got, bool) or got is None or isinstance(got, (str, dict)):
         raise CheckFailure(f"{call} should return a number for a scalar t; got {describe(got)}.")
@@ -366,7 +373,7 @@ def pick_figure(value: Any, drawn: list[Any], *, call: str) -> tuple[dict, str]:
                        f"...; return fig); got {describe(value)} and no figure was drawn.")
 
 
-def draw_runge_plot(student: Any, feedback: Any, n: int) -> tuple[dict, str, str]:
+def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[dict, str, str]:
     """Call ``plot_runge(n)``; return (figure data, note, call text), the picture attached."""
     call = f"plot_runge({n})"
     value, drawn = student.call("plot_runge", n, figures=True)
@@ -377,11 +384,7 @@ def draw_runge_plot(student: Any, feedback: Any, n: int) -> tuple[dict, str, str
     return figure, note, call
 
 
-def png_bytes(figure: Mapping[str, Any]) -> bytes | None:
-    png = figure.get("png")
-    if isinstance(png, np.ndarray):
-        return png.astype(np.uint8).tobytes()
-    return bytes(png) if isinstance(png, (bytes, bytearray)) else None
+png_bytes = figure_png
 
 
 def drawn_curves(figure: Mapping[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -423,7 +426,7 @@ def _count(k: int) -> str:
 
 
 def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[Curve],
-                     nearby: Mapping[str, Sequence[Curve]] | None = None, credit: Any,
+                     nearby: Mapping[str, Sequence[Curve]] | None = None, credit: Credit,
                      note: str = "") -> None:
     """Find each wanted curve among the drawn ones (by values, not labels or colours).
 

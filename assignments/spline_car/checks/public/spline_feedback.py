@@ -124,7 +124,7 @@ def _shape_message(shape: tuple[int, ...], pieces: int, name: str) -> str:
     return text
 
 
-def finish(reading: Reading, credit: Any) -> None:
+def finish(reading: Reading, credit: Credit) -> None:
     """End a check whose mathematics passed: full points, or part for a broken convention."""
     if reading.convention is not None:
         credit.partial(CONVENTION_FRACTION, sentence(reading.convention))
@@ -245,7 +245,7 @@ def check_values(reading: Reading, expected: np.ndarray, rtol: float) -> None:
 
 
 def grade_coefficients(got: Any, x: np.ndarray, y: np.ndarray, expected: np.ndarray,
-                       credit: Any, *, rtol: float) -> None:
+                       credit: Credit, *, rtol: float) -> None:
     """All stages: layout, passes through the points, C2, natural ends, values."""
     reading = read_coefficients(got, x, y)
     check_passes_through(reading, x, y, rtol)
@@ -274,7 +274,7 @@ def where_is(t: float, x: np.ndarray) -> str:
 
 def grade_eval(got: Any, x: np.ndarray, t: np.ndarray, expected: np.ndarray, *,
                rtol: float, retry_reversed: Callable[[], Any] | None = None,
-               credit: Any = None) -> None:
+               credit: Credit = None) -> None:
     """Compare ``spline_eval`` values with the expected ones, saying where they differ.
 
     If they differ and ``retry_reversed`` is given, it is called (it should

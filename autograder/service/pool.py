@@ -1,0 +1,102 @@
+"""Starting grading processes whose lives are tied to the service's (stdlib only).
+
+A grading process is spawned (never forked: the web server has threads) and its
+first act, before the heavy imports of the engine, is to ask the kernel for
+SIGKILL when the service dies (``PR_SET_PDEATHSIG``) and to check the service
+is still its parent (it may have died while the process was starting). The
+kernel clears that request when a process's credentials change, which the
+engine may do while setting up a slot, so a thread also watches the parent id
+and ends the process when the service is gone. Either way no grading process
+outlives a service killed with SIGKILL, and its unfinished job's lease runs out.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+_PR_SET_PDEATHSIG = 1
+#: seconds a claim lasts without renewal (the default of ``--lease``)
+LEASE_SECONDS = 30.0
+
+
+@dataclass(frozen=True)
+class WorkerSettings:
+    """What a grading process needs (picklable: it crosses a ``spawn``)."""
+
+    course_path: str
+    database_url: str
+    lease_seconds: float = LEASE_SECONDS
+    poll_seconds: float = 0.2
+
+
+def _ask_kernel_to_kill_us() -> None:
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the watching thread still ends us
+        pass
+
+
+def _watch(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os._exit(1)  # the warm workers die with us (their own PR_SET_PDEATHSIG)
+
+
+def worker_entry(settings: WorkerSettings, stop: Any, name: str, parent: int) -> None:
+    """The target of a grading process: tie it to ``parent``, then run the grading loop."""
+    _ask_kernel_to_kill_us()
+    if os.getppid() != parent:  # the service died while this process was starting
+        os._exit(1)
+    threading.Thread(target=_watch, args=(parent,), daemon=True, name="watch-service").start()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the service; it stops us
+    from autograder.service.workers import worker_main
+
+    worker_main(settings, stop, name, parent)
+
+
+class GradingPool:
+    """``jobs`` grading processes pulling from the database queue; dead ones are replaced."""
+
+    def __init__(self, settings: WorkerSettings, jobs: int) -> None:
+        self.settings = settings
+        self.jobs = jobs
+        self._context = multiprocessing.get_context("spawn")
+        self._stop = self._context.Event()
+        self._procs: list[Any] = []
+        self._closing = threading.Event()
+
+    def start(self) -> None:
+        for index in range(self.jobs):
+            self._procs.append(self._spawn(index))
+        threading.Thread(target=self._restart_dead, daemon=True, name="grading-pool").start()
+
+    def _spawn(self, index: int) -> Any:
+        proc = self._context.Process(
+            target=worker_entry, name=f"grader-{index}", daemon=True,
+            args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid()))
+        proc.start()
+        return proc
+
+    def _restart_dead(self) -> None:
+        """A grading process that died (out of memory, say) is replaced."""
+        while not self._closing.wait(1.0):
+            for index, proc in enumerate(self._procs):
+                if not proc.is_alive() and not self._closing.is_set():
+                    self._procs[index] = self._spawn(index)
+
+    def stop(self, timeout: float = 30.0) -> None:
+        self._closing.set()
+        self._stop.set()
+        deadline = time.monotonic() + timeout
+        for proc in self._procs:
+            proc.join(max(0.1, deadline - time.monotonic()))
+            if proc.is_alive():
+                proc.kill()
+                proc.join(5)

@@ -1,0 +1,369 @@
+"""This engine against the bare floor, nbgrader and otter-grader, on the same files, in one run.
+
+Usage: ``python benchmarks/engine_vs_peers.py [--quick] [--count 24] [--trivial 100]
+[--otter PATH-TO-otter] [--skip-peers]``.
+
+What it prints (medians are not used: each figure is one run over the batch):
+
+* start-up: CPU and wall seconds of ``autograder --help`` and ``--version`` (best of
+  three, beside ``python -c pass``), and for every engine run the time from the
+  command's start to its first ``results.json``;
+* hull, every check and ``--public-only``: the bare floor (``_floor.py``: student
+  cells and the same pytest checks in warm processes, no isolation, one process per
+  core), this engine ``--jobs 1`` and ``--jobs 2``, ``nbgrader autograde`` (its test
+  cells) and ``otter run`` (the same test cells as OK tests), each with
+  submissions/s, CPU per submission split into grader and worker, and every ratio;
+* a trivial assignment (one cell, one check) built in a temporary folder: the
+  engine overhead, total CPU per submission minus the floor's.
+
+CPU is measured from outside: ``resource.getrusage(RUSAGE_CHILDREN)`` around each
+command (every process it reaped) and, for the split and for processes nobody
+reaps, psutil samples of the command's process tree every 0.1 s. "Worker" is the
+process that ran student code: ``autograder.worker`` (with the forks it reaped)
+for this engine, the ipykernel for nbgrader and otter, nothing for the floor.
+On a busy machine every figure moves; the ratios, taken in one run, move less.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import nbformat
+import psutil
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from grade_vs_nbgrader import HULL, build_batch  # noqa: E402
+
+PYTHON = sys.executable
+HERE = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class Run:
+    """One command over a batch: seconds, CPU seconds (total and in workers), first result."""
+
+    label: str
+    count: int
+    wall: float
+    cpu: float
+    worker_cpu: float
+    first_result: float | None = None
+    steady_rate: float | None = None
+
+    @property
+    def rate(self) -> float:
+        return self.count / self.wall
+
+    @property
+    def cpu_ms(self) -> float:
+        return 1000 * self.cpu / self.count
+
+    @property
+    def worker_ms(self) -> float:
+        return 1000 * self.worker_cpu / self.count
+
+    @property
+    def grader_ms(self) -> float:
+        return self.cpu_ms - self.worker_ms
+
+
+class TreeSampler(threading.Thread):
+    """Samples the CPU of a process tree; remembers each process's last figures."""
+
+    def __init__(self, root: int, worker_marker: str | None, results: Path | None) -> None:
+        super().__init__(daemon=True)
+        self.root, self.marker, self.results = root, worker_marker, results
+        self.own: dict[int, float] = {}       # pid -> its own user + system
+        self.reaped: dict[int, float] = {}    # pid of a worker -> its reaped children's CPU
+        self.first: float | None = None
+        self.stopping = threading.Event()
+
+    def run(self) -> None:
+        start = time.perf_counter()
+        while not self.stopping.is_set():
+            self.sample()
+            if self.first is None and self.results is not None and any(
+                    self.results.glob("*/results.json")):
+                self.first = time.perf_counter() - start
+            self.stopping.wait(0.1)
+
+    def sample(self) -> None:
+        try:
+            procs = [psutil.Process(self.root)]
+            procs += procs[0].children(recursive=True)
+        except psutil.Error:
+            return
+        workers: set[int] = set()
+        for proc in procs:  # parents come before their children
+            try:
+                times = proc.cpu_times()
+                worker = self.marker is not None and self.marker in " ".join(proc.cmdline())
+                parent = proc.ppid()
+            except psutil.Error:
+                continue
+            if worker:
+                workers.add(proc.pid)
+                if parent in workers:
+                    continue  # a fork of a worker: counted in its parent's children_* once reaped
+                self.reaped[proc.pid] = times.children_user + times.children_system
+            self.own[proc.pid] = times.user + times.system
+
+    def worker_cpu(self) -> float:
+        return sum(self.own[p] + self.reaped[p] for p in self.reaped)
+
+
+def measure(label: str, cmd: list[str], count: int, *, cwd: Path | None = None,
+            worker: str | None = None, results: Path | None = None) -> Run:
+    """Run ``cmd`` and measure it; exit on failure with its last output."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sampler = TreeSampler(proc.pid, worker, results)
+    sampler.start()
+    out, err = proc.communicate()
+    wall = time.perf_counter() - start
+    sampler.stopping.set()
+    sampler.join()
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        raise SystemExit(f"{label}: {' '.join(cmd[:4])} ... exited {proc.returncode}:\n"
+                         f"{out[-1500:]}\n{err[-3000:]}")
+    reaped = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    sampled = sum(sampler.own.values()) + sum(sampler.reaped.values())
+    return Run(label, count, wall, max(reaped, sampled), sampler.worker_cpu(),
+               sampler.first, _steady_rate(results))
+
+
+def _steady_rate(results: Path | None) -> float | None:
+    """Submissions/s between the first and the last result written (start-up excluded)."""
+    if results is None:
+        return None
+    stamps = sorted(p.stat().st_mtime for p in results.glob("*/results.json"))
+    if len(stamps) < 3 or stamps[-1] <= stamps[0]:
+        return None
+    return (len(stamps) - 1) / (stamps[-1] - stamps[0])
+
+
+# -- the runs -------------------------------------------------------------------
+
+def run_floor(assignment: Path, notebooks: list[Path], public_only: bool, procs: int = 2) -> Run:
+    """The floor on ``procs`` processes, each with its share; only the warm loops are counted."""
+    shares = [notebooks[k::procs] for k in range(procs)]
+    extra = ["--public-only"] if public_only else []
+    running = [subprocess.Popen([PYTHON, str(HERE / "_floor.py"), str(assignment), *extra,
+                                 *map(str, share)], stdout=subprocess.PIPE, text=True)
+               for share in shares if share]
+    reports = []
+    for proc in running:
+        out, _ = proc.communicate()
+        if proc.returncode != 0:
+            raise SystemExit(f"floor failed: {out[-2000:]}")
+        reports.append(json.loads(out.strip().splitlines()[-1]))
+    return Run("bare floor", len(notebooks), max(r["wall"] for r in reports),
+               sum(r["cpu"] for r in reports), 0.0)
+
+
+def run_engine(assignment: Path, batch: Path, out: Path, jobs: int, public_only: bool,
+               count: int) -> Run:
+    cmd = [PYTHON, "-m", "autograder", "grade", str(assignment), str(batch), "--out", str(out),
+           "--jobs", str(jobs), "--no-progress"] + (["--public-only"] if public_only else [])
+    return measure(f"autograder --jobs {jobs}", cmd, count, worker="autograder.worker",
+                   results=out)
+
+
+def prepare_nbgrader(batch: Path, course: Path) -> None:
+    (course / "source" / "hull").mkdir(parents=True)
+    shutil.copy(HULL / "hull.ipynb", course / "source" / "hull" / "hull.ipynb")
+    shutil.copytree(HULL / "data", course / "source" / "hull" / "data")
+    (course / "nbgrader_config.py").write_text(
+        f'c = get_config()\nc.CourseDirectory.course_id = "bench"\n'
+        f'c.CourseDirectory.root = {str(course)!r}\n')
+    subprocess.run(["nbgrader", "generate_assignment", "hull", "--force"], cwd=course,
+                   check=True, capture_output=True)
+    for student in sorted(batch.iterdir()):
+        target = course / "submitted" / student.name / "hull"
+        shutil.copytree(student / "hull", target)
+        shutil.copytree(HULL / "data", target / "data")
+
+
+def run_nbgrader(batch: Path, course: Path, count: int) -> Run:
+    prepare_nbgrader(batch, course)
+    return measure("nbgrader autograde", ["nbgrader", "autograde", "hull", "--force"], count,
+                   cwd=course, worker="ipykernel")
+
+
+def otter_zip(work: Path, otter: str) -> Path:
+    """An otter autograder zip whose OK tests are the notebook's nbgrader test cells."""
+    tests = work / "tests"
+    tests.mkdir(parents=True)
+    book = nbformat.read(HULL / "hull.ipynb", as_version=4)
+    for cell in book.cells:
+        meta = cell.metadata.get("nbgrader", {})
+        if cell.cell_type == "code" and meta.get("grade") and not meta.get("solution"):
+            name = meta["grade_id"]
+            test = {"name": name, "points": meta.get("points", 1), "suites": [{
+                "cases": [{"code": f">>> exec({cell.source!r})", "hidden": False, "locked": False}],
+                "scored": True, "setup": "", "teardown": "", "type": "doctest"}]}
+            (tests / f"{name}.py").write_text(f"OK_FORMAT = True\n\ntest = {test!r}\n")
+    (work / "data").mkdir()
+    shutil.copytree(HULL / "data", work / "data", dirs_exist_ok=True)
+    subprocess.run([otter, "generate", "-t", "tests", "--no-requirements", "--no-environment",
+                    "--no-config", "-o", "autograder.zip", "data/pins.csv"], cwd=work, check=True,
+                   capture_output=True)
+    return work / "autograder.zip"
+
+
+def run_otter(notebooks: list[Path], work: Path, otter: str) -> Run:
+    """``otter run`` once per notebook (it grades one submission per command), in a shell loop."""
+    archive = otter_zip(work, otter)
+    lines = []
+    for k, nb in enumerate(notebooks):
+        folder = work / f"sub{k:04d}"
+        folder.mkdir()
+        shutil.copy(nb, folder / "hull.ipynb")
+        shutil.copytree(HULL / "data", folder / "data")
+        lines.append(f"{otter} run -a {archive} -o {folder} --no-logo {folder / 'hull.ipynb'} "
+                     f">> {work / 'otter.log'} 2>&1 || exit 1")
+    script = work / "run.sh"
+    script.write_text("set -e\n" + "\n".join(lines) + "\n")
+    return measure("otter run", ["bash", str(script)], len(notebooks), cwd=work, worker="ipykernel")
+
+
+def write_trivial(root: Path, count: int) -> tuple[Path, Path]:
+    """A one-cell, one-check assignment and ``count`` submissions of it (half of them wrong)."""
+    folder = root / "trivial"
+    (folder / "checks" / "public").mkdir(parents=True)
+    (folder / "checks" / "hidden").mkdir(parents=True)
+    (folder / "assignment.toml").write_text(
+        '[assignment]\nname = "trivial"\ntitle = "Double it"\nnotebook = "trivial.ipynb"\n')
+    solution = nbformat.v4.new_code_cell(
+        "### BEGIN SOLUTION\ndef double(x):\n    return 2 * x\n### END SOLUTION",
+        metadata={"nbgrader": {"grade_id": "double", "solution": True, "grade": False,
+                               "locked": False, "schema_version": 3}})
+    book = nbformat.v4.new_notebook(cells=[solution], metadata={
+        "kernelspec": {"name": "python3", "display_name": "Python 3", "language": "python"}})
+    nbformat.write(book, folder / "trivial.ipynb")
+    (folder / "checks" / "public" / "test_trivial.py").write_text(
+        "def test_double(student):\n    assert student.double(21) == 42, 'double(21) must be 42'\n")
+    batch = root / "trivial-submitted"
+    for k in range(count):
+        body = "2 * x" if k % 2 == 0 else "x + x + 1"
+        sub = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(
+            f"# submission {k}\ndef double(x):\n    return {body}")], metadata=book.metadata)
+        target = batch / f"t{k:04d}.ipynb"
+        target.parent.mkdir(exist_ok=True)
+        nbformat.write(sub, target)
+    return folder, batch
+
+
+# -- start-up --------------------------------------------------------------------
+
+def startup(cmd: list[str], tries: int = 3) -> tuple[float, float]:
+    """Best CPU and wall seconds of ``cmd`` over ``tries`` runs."""
+    best_cpu = best_wall = float("inf")
+    for _ in range(tries):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        subprocess.run(cmd, check=True, capture_output=True)
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        best_wall = min(best_wall, wall)
+        best_cpu = min(best_cpu, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+    return best_cpu, best_wall
+
+
+def print_startup() -> None:
+    print("start-up (best of 3; CPU s / wall s):")
+    for label, cmd in (("python -c pass", [PYTHON, "-c", "pass"]),
+                       ("autograder --help", [PYTHON, "-m", "autograder", "--help"]),
+                       ("autograder --version", [PYTHON, "-m", "autograder", "--version"])):
+        cpu, wall = startup(cmd)
+        print(f"  {label:<24} {cpu:6.3f} CPU s  {wall:6.3f} s")
+
+
+# -- report ----------------------------------------------------------------------
+
+def print_runs(title: str, runs: list[Run]) -> None:
+    print(f"\n{title}", flush=True)
+    print(f"  {'':<22} {'subm/s':>8} {'steady/s':>9} {'CPU ms/subm':>12} {'grader':>8} "
+          f"{'worker':>8} {'first result':>13}")
+    for r in runs:
+        steady = f"{r.steady_rate:9.2f}" if r.steady_rate else f"{'-':>9}"
+        first = f"{r.first_result:11.1f} s" if r.first_result is not None else f"{'-':>13}"
+        print(f"  {r.label:<22} {r.rate:8.2f} {steady} {r.cpu_ms:12.1f} {r.grader_ms:8.1f} "
+              f"{r.worker_ms:8.1f} {first}")
+    by = {r.label: r for r in runs}
+    pairs = [("autograder --jobs 1", "bare floor"), ("autograder --jobs 2", "bare floor"),
+             ("autograder --jobs 2", "autograder --jobs 1"),
+             ("autograder --jobs 2", "nbgrader autograde"), ("autograder --jobs 2", "otter run"),
+             ("autograder --jobs 1", "nbgrader autograde"), ("autograder --jobs 1", "otter run"),
+             ("bare floor", "nbgrader autograde"), ("bare floor", "otter run")]
+    for a, b in pairs:
+        if a in by and b in by:
+            print(f"  ratio {a} / {b}: {by[a].rate / by[b].rate:6.2f}x submissions/s, "
+                  f"{by[a].cpu_ms / by[b].cpu_ms:6.2f}x CPU per submission")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="12 hull and 40 trivial submissions")
+    parser.add_argument("--count", type=int, default=24, help="hull submissions (default: 24)")
+    parser.add_argument("--trivial", type=int, default=100, help="trivial submissions (default: 100)")
+    parser.add_argument("--otter", default=shutil.which("otter"),
+                        help="the otter command (e.g. a throwaway venv's bin/otter)")
+    parser.add_argument("--otter-count", type=int, default=6,
+                        help="hull submissions for otter, the first of the batch (one `otter run` "
+                             "each, several seconds apiece; default: 6)")
+    parser.add_argument("--skip-peers", action="store_true", help="no nbgrader, no otter")
+    args = parser.parse_args(argv)
+    count, trivial = (12, 40) if args.quick else (args.count, args.trivial)
+    if args.quick:
+        args.otter_count = min(args.otter_count, 3)
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
+    print_startup()
+    with tempfile.TemporaryDirectory(prefix="bench-peers-") as tmp:
+        work = Path(tmp)
+        folder, tbatch = write_trivial(work, trivial)
+        tnotebooks = sorted(tbatch.glob("*.ipynb"))
+        floor = run_floor(folder, tnotebooks, False)
+        engine = [run_engine(folder, tbatch, work / f"tout-{j}", j, False, trivial) for j in (1, 2)]
+        print_runs(f"trivial assignment (one cell, one check), {trivial} submissions",
+                   [floor, *engine])
+        for r in engine:
+            print(f"  engine overhead, {r.label}: {r.cpu_ms - floor.cpu_ms:.1f} ms CPU per "
+                  f"submission (total {r.cpu_ms:.1f} - floor {floor.cpu_ms:.1f})")
+        batch = work / "submitted"
+        notebooks = build_batch(batch, count)
+        for public_only in (False, True):
+            runs = [run_floor(HULL, notebooks, public_only)]
+            for jobs in (1, 2):
+                runs.append(run_engine(HULL, batch, work / f"out-{jobs}-{public_only}", jobs,
+                                       public_only, count))
+            if not args.skip_peers and not public_only:
+                runs.append(run_nbgrader(batch, work / "course", count))
+                if args.otter:
+                    runs.append(run_otter(notebooks[:args.otter_count], work / "otter", args.otter))
+                else:
+                    print("otter: not found; pass --otter PATH (pip install otter-grader in a venv)")
+                peers = [r for r in runs if r.label in ("nbgrader autograde", "otter run")]
+            elif not args.skip_peers:
+                runs += peers  # the peers run their test cells only: the same run for both lines
+            print_runs(f"hull, {count} submissions, "
+                       f"{'public checks only' if public_only else 'every check'} "
+                       "(peers: the notebook's own test cells)", runs)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
