@@ -84,23 +84,18 @@ def make_bundle(assignment: Assignment) -> Bundle:
 
 
 def engine_fingerprint() -> str:
-    """SHA-256 over the sources of ``autograder`` and ``reference`` and the engine version.
+    """The engine version and the digest of the ``autograder`` and ``reference`` sources.
 
     A worker compares it with the client's before grading: a different engine or
-    reference package could give different scores under the same result key.
-    Computed afresh each time (a few milliseconds), so a long-lived client that
-    was upgraded on disk is compared as it now is.
+    reference package could give different scores under the same result key. The
+    same digest is part of every result key (``autograder.grading.engine_digest``);
+    it is computed afresh here, so a long-lived client upgraded on disk is compared
+    as it now is. ``reference`` is located, never imported.
     """
-    import reference  # the model solutions the checks import
+    from autograder.grading import ENGINE_VERSION, engine_digest
 
-    digest = hashlib.sha256(autograder.__version__.encode())
-    for package in (autograder, reference):
-        top = Path(package.__file__).resolve().parent
-        for path in _files(top):
-            if path.suffix == ".py" or path.parent.name == "templates":
-                digest.update(f"\0{package.__name__}/{path.relative_to(top).as_posix()}\0".encode())
-                digest.update(path.read_bytes())
-    return digest.hexdigest()
+    fresh = engine_digest.__wrapped__()  # the uncached function behind functools.cache
+    return hashlib.sha256(f"{ENGINE_VERSION}|{fresh}".encode()).hexdigest()
 
 
 def private_directory(prefix: str = "autograder-bundle-") -> Path:

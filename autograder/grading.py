@@ -166,6 +166,8 @@ class Grader:
         self.options = options or GradingOptions()
         self.policy = policy_for(assignment, self.options)
         self._locked = locked_sources(assignment.notebook)
+        #: how many check items the first run collected; every later run must match
+        self._collected: int | None = None
         self._slot = WorkerSlot(slot=slot)
 
     def __enter__(self) -> "Grader":
@@ -256,23 +258,35 @@ class Grader:
             hidden_root=self.assignment.root / "checks" / "hidden",
             attachments=(out_dir / "images") if out_dir is not None else None)
         plugin = GradingPlugin(context)
-        status = run_pytest(self.check_files, self.assignment.root, plugin)
+        # Every submission imports the checks afresh: no module global of a check (or of
+        # its helpers) carries one student's state into the next, an edited check is
+        # never run from an old copy, and a check file that failed to import fails again
+        # instead of silently dropping its checks.
+        forget_check_modules(self.assignment.root / "checks")
+        try:
+            status = run_pytest(self.check_files, self.assignment.root, plugin)
+        finally:
+            forget_check_modules(self.assignment.root / "checks")
+        if not plugin.collection_errors and not plugin.results \
+                and status != pytest.ExitCode.INTERRUPTED:
+            plugin.collection_errors.append("no checks were collected")
+        if plugin.collection_errors:  # pytest reports these as "interrupted" too
+            raise AssignmentError(
+                f"The checks of assignment {self.assignment.name!r} could not be collected; "
+                "fix them before grading:\n" + "\n".join(plugin.collection_errors))
         if status == pytest.ExitCode.INTERRUPTED:
             # Ctrl-C inside pytest is turned into an exit status: a partial run must
             # never be stored as a graded result.
             raise KeyboardInterrupt
-        if not plugin.collection_errors and not plugin.results:
-            plugin.collection_errors.append("no checks were collected")
-        if plugin.collection_errors:
-            raise AssignmentError(
-                f"The checks of assignment {self.assignment.name!r} could not be collected; "
-                "fix them before grading:\n" + "\n".join(plugin.collection_errors))
+        expected = self._collected if self._collected is not None else plugin.collected
         if status not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED) or \
-                len(plugin.results) != plugin.collected:
+                len(plugin.results) != plugin.collected or plugin.collected != expected:
             raise EngineError(
                 f"the check run ended early (pytest status {int(status)}, "
-                f"{len(plugin.results)} of {plugin.collected} checks recorded); nothing was "
-                "stored, and the submission is graded again on the next run")
+                f"{len(plugin.results)} of {plugin.collected} checks recorded, {expected} "
+                "expected); nothing was stored, and the submission is graded again on the "
+                "next run")
+        self._collected = expected
         if out_dir is not None and plugin.instructor_log:
             out_dir.mkdir(parents=True, exist_ok=True)
             (out_dir / "grader.log").write_text("\n\n".join(plugin.instructor_log))
@@ -293,6 +307,22 @@ class Grader:
         if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
             roots.add(package.parent)
         return sorted(roots)
+
+
+def forget_check_modules(*folders: Path) -> None:
+    """Drop every imported module of the checks in ``folders`` (and their helpers).
+
+    pytest's ``--import-mode=importlib`` names a check module by its place in the
+    assignment (``checks.hidden.test_hull_hidden``, with ``checks`` and
+    ``checks.hidden`` as file-less parents) and reuses a module of that name found
+    in ``sys.modules``; dropping them makes the next run import what is on disk.
+    """
+    tops = tuple(str(folder.resolve()) + os.sep for folder in folders)
+    for name, module in list(sys.modules.items()):
+        origin = getattr(module, "__file__", None)
+        if name == "checks" or name.startswith("checks.") or (
+                isinstance(origin, str) and os.path.realpath(origin).startswith(tops)):
+            del sys.modules[name]
 
 
 @functools.lru_cache(maxsize=32)
@@ -456,5 +486,6 @@ def _file_sha256(path: Path) -> str:
 
 
 __all__ = ["ENGINE_VERSION", "REVIEW_PREFIX", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
+           "forget_check_modules",
            "forbidden_functions", "review_notes", "run_pytest", "submission_key", "submission_seed",
            "summarise_run"]

@@ -294,15 +294,22 @@ def print_startup() -> None:
 
 # -- report ----------------------------------------------------------------------
 
-def print_runs(title: str, runs: list[Run]) -> None:
-    print(f"\n{title}", flush=True)
+def print_header(title: str) -> None:
+    print(f"\n{title}")
     print(f"  {'':<22} {'subm/s':>8} {'steady/s':>9} {'CPU ms/subm':>12} {'grader':>8} "
-          f"{'worker':>8} {'first result':>13}")
-    for r in runs:
-        steady = f"{r.steady_rate:9.2f}" if r.steady_rate else f"{'-':>9}"
-        first = f"{r.first_result:11.1f} s" if r.first_result is not None else f"{'-':>13}"
-        print(f"  {r.label:<22} {r.rate:8.2f} {steady} {r.cpu_ms:12.1f} {r.grader_ms:8.1f} "
-              f"{r.worker_ms:8.1f} {first}")
+          f"{'worker':>8} {'first result':>13}", flush=True)
+
+
+def print_row(r: Run) -> Run:
+    """Print one run as soon as it is measured (a long run may be stopped half-way)."""
+    steady = f"{r.steady_rate:9.2f}" if r.steady_rate else f"{'-':>9}"
+    first = f"{r.first_result:11.1f} s" if r.first_result is not None else f"{'-':>13}"
+    print(f"  {r.label:<22} {r.rate:8.2f} {steady} {r.cpu_ms:12.1f} {r.grader_ms:8.1f} "
+          f"{r.worker_ms:8.1f} {first}", flush=True)
+    return r
+
+
+def print_ratios(runs: list[Run]) -> None:
     by = {r.label: r for r in runs}
     pairs = [("autograder --jobs 1", "bare floor"), ("autograder --jobs 2", "bare floor"),
              ("autograder --jobs 2", "autograder --jobs 1"),
@@ -312,14 +319,28 @@ def print_runs(title: str, runs: list[Run]) -> None:
     for a, b in pairs:
         if a in by and b in by:
             print(f"  ratio {a} / {b}: {by[a].rate / by[b].rate:6.2f}x submissions/s, "
-                  f"{by[a].cpu_ms / by[b].cpu_ms:6.2f}x CPU per submission")
+                  f"{by[a].cpu_ms / by[b].cpu_ms:6.2f}x CPU per submission", flush=True)
+
+
+def trivial_overhead(work: Path, count: int) -> None:
+    """The engine overhead: CPU per submission of a one-cell, one-check assignment minus the floor's."""
+    folder, batch = write_trivial(work, count)
+    print_header(f"trivial assignment (one cell, one check), {count} submissions")
+    floor = print_row(run_floor(folder, sorted(batch.glob("*.ipynb")), False))
+    engine = [print_row(run_engine(folder, batch, work / f"tout-{j}", j, False, count))
+              for j in (1, 2)]
+    print_ratios([floor, *engine])
+    for r in engine:
+        print(f"  engine overhead, {r.label}: {r.cpu_ms - floor.cpu_ms:.1f} ms CPU per "
+              f"submission (total {r.cpu_ms:.1f} - floor {floor.cpu_ms:.1f})", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="12 hull and 40 trivial submissions")
     parser.add_argument("--count", type=int, default=24, help="hull submissions (default: 24)")
-    parser.add_argument("--trivial", type=int, default=100, help="trivial submissions (default: 100)")
+    parser.add_argument("--trivial", type=int, default=100,
+                        help="trivial submissions (default: 100; 0 skips the trivial assignment)")
     parser.add_argument("--otter", default=shutil.which("otter"),
                         help="the otter command (e.g. a throwaway venv's bin/otter)")
     parser.add_argument("--otter-count", type=int, default=6,
@@ -327,41 +348,36 @@ def main(argv: list[str] | None = None) -> int:
                              "each, several seconds apiece; default: 6)")
     parser.add_argument("--skip-peers", action="store_true", help="no nbgrader, no otter")
     args = parser.parse_args(argv)
-    count, trivial = (12, 40) if args.quick else (args.count, args.trivial)
+    count, trivial = (12, min(40, args.trivial)) if args.quick else (args.count, args.trivial)
     if args.quick:
         args.otter_count = min(args.otter_count, 3)
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
     print_startup()
     with tempfile.TemporaryDirectory(prefix="bench-peers-") as tmp:
         work = Path(tmp)
-        folder, tbatch = write_trivial(work, trivial)
-        tnotebooks = sorted(tbatch.glob("*.ipynb"))
-        floor = run_floor(folder, tnotebooks, False)
-        engine = [run_engine(folder, tbatch, work / f"tout-{j}", j, False, trivial) for j in (1, 2)]
-        print_runs(f"trivial assignment (one cell, one check), {trivial} submissions",
-                   [floor, *engine])
-        for r in engine:
-            print(f"  engine overhead, {r.label}: {r.cpu_ms - floor.cpu_ms:.1f} ms CPU per "
-                  f"submission (total {r.cpu_ms:.1f} - floor {floor.cpu_ms:.1f})")
+        if trivial:
+            trivial_overhead(work, trivial)
         batch = work / "submitted"
         notebooks = build_batch(batch, count)
+        peers: list[Run] = []
         for public_only in (False, True):
-            runs = [run_floor(HULL, notebooks, public_only)]
+            print_header(f"hull, {count} submissions, "
+                         f"{'public checks only' if public_only else 'every check'} "
+                         "(peers: the notebook's own test cells)")
+            runs = [print_row(run_floor(HULL, notebooks, public_only))]
             for jobs in (1, 2):
-                runs.append(run_engine(HULL, batch, work / f"out-{jobs}-{public_only}", jobs,
-                                       public_only, count))
+                runs.append(print_row(run_engine(HULL, batch, work / f"out-{jobs}-{public_only}",
+                                                 jobs, public_only, count)))
             if not args.skip_peers and not public_only:
-                runs.append(run_nbgrader(batch, work / "course", count))
+                peers.append(print_row(run_nbgrader(batch, work / "course", count)))
                 if args.otter:
-                    runs.append(run_otter(notebooks[:args.otter_count], work / "otter", args.otter))
+                    peers.append(print_row(run_otter(notebooks[:args.otter_count], work / "otter",
+                                                     args.otter)))
                 else:
                     print("otter: not found; pass --otter PATH (pip install otter-grader in a venv)")
-                peers = [r for r in runs if r.label in ("nbgrader autograde", "otter run")]
-            elif not args.skip_peers:
-                runs += peers  # the peers run their test cells only: the same run for both lines
-            print_runs(f"hull, {count} submissions, "
-                       f"{'public checks only' if public_only else 'every check'} "
-                       "(peers: the notebook's own test cells)", runs)
+            elif peers:  # the peers run their test cells only: the same runs for both lines
+                print("  (nbgrader and otter: the runs above)")
+            print_ratios(runs + peers)
     return 0
 
 

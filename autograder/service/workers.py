@@ -20,7 +20,7 @@ from typing import Any, Sequence
 from autograder.assignment import checks_digest, load_assignment
 from autograder.batch import error_result
 from autograder.feedback import write_feedback
-from autograder.grading import Grader, GradingOptions
+from autograder.grading import Grader, GradingOptions, forget_check_modules
 from autograder.report import write_result
 from autograder.results import SubmissionResult
 from autograder.service import jobqueue
@@ -46,7 +46,7 @@ class _Graders:
         found = load_assignment(policy.spec)
         digest = checks_digest(found.root)
         if self._last != (name, digest):
-            forget_check_modules([load_assignment(p.spec).root / "checks"
+            forget_check_modules(*[load_assignment(p.spec).root / "checks"
                                   for p in self.course.assignments])
             self._last = (name, digest)
         held = self._held.get(name)
@@ -58,27 +58,25 @@ class _Graders:
         self._held[name] = (digest, grader)
         return grader
 
+    def drop(self, name: str) -> None:
+        """Forget the Grader of ``name`` and every imported check after an engine failure.
+
+        A retry then starts from the files on disk: a check module that failed to
+        import must not linger half-made in ``sys.modules`` (a later run in the same
+        process could otherwise skip that file and grade with the other checks only).
+        """
+        held = self._held.pop(name, None)
+        self._last = None
+        if held is not None:
+            try:
+                held[1].close()
+            except Exception:  # closing a broken slot must not hide the failure being handled
+                pass
+
     def close(self) -> None:
         for _, grader in self._held.values():
             grader.close()
         self._held.clear()
-
-
-def forget_check_modules(folders: Sequence[Path]) -> None:
-    """Drop imported check modules, so the next run imports the checks on disk now.
-
-    The engine runs checks with pytest's ``--import-mode=importlib``, which names
-    a check module by its path inside the assignment (``checks.hidden.test_hull_hidden``)
-    and reuses a module of that name already in ``sys.modules``. In a process that
-    lives on (this one) an edited check, or another assignment's file of the same
-    name, would otherwise run the old code. Called when the assignment or its
-    checks change, so a steady stream of one assignment keeps its warm modules.
-    """
-    prefixes = tuple(f"{folder.resolve()}{os.sep}" for folder in folders)
-    for name, module in list(sys.modules.items()):
-        origin = getattr(module, "__file__", None) or ""
-        if name == "checks" or name.startswith("checks.") or origin.startswith(prefixes):
-            del sys.modules[name]
 
 
 def grade_job(graders: _Graders, storage: Storage, submission: Submission,
@@ -96,6 +94,7 @@ def grade_job(graders: _Graders, storage: Storage, submission: Submission,
     except (Exception, KeyboardInterrupt) as exc:  # the engine's failure: retried, shown to
         # the instructor. SIGINT is ignored in grading processes, so a KeyboardInterrupt
         # here comes from the engine itself, never from a person.
+        graders.drop(submission.assignment)
         result = _error(submission, notebook, exc)
         write_result(out, result)
     write_feedback(out, result, title=title)

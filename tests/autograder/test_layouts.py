@@ -123,7 +123,7 @@ def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, worksp
     assert proc.returncode == 0, proc.stderr
     shutil.copy(EXAMPLES / "solution.ipynb", released / "hull.ipynb")
     env = envs.make_venv(course / "venv", install=[str(repo)], cache=cache)
-    probe = env.run("python", "-c", "import reference")
+    probe = env.run("python", "-c", "import reference", cwd=course)
     assert probe.returncode != 0, "the student's install must not contain the model solutions"
     proc = env.run("autograder", "check", "hull/hull.ipynb", cwd=course)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -186,7 +186,8 @@ def test_ordinary_user_installed_package_assignment_outside(
     subprocess.run(["chmod", "-R", "a+rwX", str(cache)], check=False)  # root filled it so far
     env = envs.make_venv(venv, install=[str(repo), str(repo / "reference")], python=python,
                          user=user, cache=cache)
-    probe = env.run("python", "-c", "import os, autograder; print(os.geteuid(), autograder.__file__)")
+    probe = env.run("python", "-c", "import os, autograder; print(os.geteuid(), autograder.__file__)",
+                    cwd=workspace)
     assert probe.returncode == 0 and not probe.stdout.startswith("0 "), probe.stdout + probe.stderr
     assert "site-packages" in probe.stdout  # the installed copy, not the checkout
     course = workspace / "user-course"

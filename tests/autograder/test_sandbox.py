@@ -317,15 +317,15 @@ def test_excluded_tree_inside_an_allowed_root_is_unreadable(tmp_path: Path, work
 def test_repository_and_reference_package_are_unreadable(workdir: Path) -> None:
     require_landlock(1, "confining reads")
     design = REPO / "docs" / "design.md"
-    source = REPO / "reference" / "geometry.py"
+    source = REPO / "reference" / "_geometry.py"
     assert design.is_file() and source.is_file()
-    preloaded = "reference.geometry" in sys.modules  # then the import cannot fail
+    preloaded = "reference._geometry" in sys.modules  # then the import cannot fail
 
     def action() -> dict[str, str]:
         return {
             "design": _try(design.read_text),
             "source": _try(source.read_text),
-            "import": _try(lambda: __import__("reference.geometry")),
+            "import": _try(lambda: __import__("reference._geometry")),
         }
 
     value = run_sandboxed(action, workdir, exclude=[REPO]).value

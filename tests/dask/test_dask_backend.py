@@ -9,6 +9,7 @@ loopback; the checks run public-only to keep the tests short.
 from __future__ import annotations
 
 import datetime
+import json
 import shutil
 import subprocess
 import sys
@@ -91,7 +92,8 @@ def _scan_notebook(path: Path, extra_ports: list[int]) -> Path:
 
 
 def _scan_report(stdout: str) -> tuple[list[int], list[int]]:
-    line = next(l for l in stdout.splitlines() if l.startswith("SCANNED"))
+    line = next((l for l in stdout.splitlines() if l.startswith("SCANNED")), None)
+    assert line is not None, f"the scanning cell printed no report; its output was:\n{stdout[-3000:]}"
     scanned, reached = line.removeprefix("SCANNED ").split(" REACHED ")
     return eval(scanned), eval(reached)  # noqa: S307 (our own notebook's printout of two int lists)
 
@@ -114,7 +116,9 @@ def test_dask_gives_the_grades_of_the_local_pool(submissions: list[Path], tmp_pa
                        progress=False)
     assert not local.failed and not remote.failed, [r.output for r in local.failed + remote.failed]
     assert (tmp_path / "dask" / "grades.csv").read_text() == (tmp_path / "local" / "grades.csv").read_text()
-    assert (tmp_path / "dask" / "summary.json").read_text() == (tmp_path / "local" / "summary.json").read_text()
+    untimed = [{k: v for k, v in json.loads((tmp_path / name / "summary.json").read_text()).items()
+                if "seconds" not in k} for name in ("dask", "local")]
+    assert untimed[0] == untimed[1]
     for result in remote.results:  # the client wrote every file, with its own paths and keys
         assert (tmp_path / "dask" / result.id / "feedback.html").is_file()
         assert result.source.startswith(str(submissions[0].parent))
@@ -133,7 +137,10 @@ def test_dead_workers_cost_no_result_and_reruns_send_only_what_is_missing(tmp_pa
     marks = tmp_path / "marks"
     marks.mkdir()
     out = tmp_path / "out"
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+    # Dask counts a worker's death against every task queued on it, not only the one
+    # running: allow two deaths so that `sleepy` (killed once by design) survives one
+    # more death shared with `doomed`, which dies three times and becomes an error.
+    with dask.config.set({"distributed.scheduler.allowed-failures": 2}):
         cluster = local_cluster(2)
     with cluster, distributed.Client(cluster) as client:
         client.register_plugin(dask_test_plugins.KillWhenGrading(marks, once=("sleepy",),
