@@ -12,7 +12,6 @@ from autograder.backends import DaskSpec, TLSFiles
 from autograder.batch import BatchReport, Shard, error_result, grade_batch
 from autograder.grading import Grader, GradingOptions
 from autograder.release import release as _release
-from autograder.report import write_result
 from autograder.results import SubmissionResult
 
 if TYPE_CHECKING:

@@ -22,7 +22,6 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import autograder
 from autograder.assignment import Assignment, load_assignment
 from autograder.errors import AssignmentError
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
-__all__ = ["CpuClock", "process_cpu_seconds", "session_cpu_seconds"]
+__all__ = ["CpuClock", "process_cpu_seconds", "queued_seconds", "session_cpu_seconds"]
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -41,6 +41,15 @@ def process_cpu_seconds(pid: int) -> float:
         return 0.0
     # fields[0] is field 3 of proc(5): utime, stime, cutime, cstime are fields 14-17.
     return sum(int(fields[i]) for i in range(11, 15)) / _TICKS
+
+
+def queued_seconds(pid: int) -> float:
+    """Run-queue wait of ``pid``'s main thread (``/proc/<pid>/schedstat``, field 2); 0.0 if unknown."""
+    try:
+        with open(f"/proc/{pid}/schedstat", "rb") as handle:
+            return int(handle.read().split()[1]) / 1e9
+    except (OSError, IndexError, ValueError):
+        return 0.0
 
 
 def session_cpu_seconds(sid: int, *, exclude: int | None = None) -> dict[int, float]:
@@ -72,12 +81,22 @@ class CpuClock:
 
     pid: int
     _start: float = 0.0
+    _queued_start: float = 0.0
     _others: float = 0.0
     _charged: dict[int, float] = field(default_factory=dict)
 
     def start(self) -> None:
         self._start = process_cpu_seconds(self.pid)
+        self._queued_start = queued_seconds(self.pid)
         self._others = 0.0
+
+    def queued(self) -> float:
+        """Seconds the child was runnable but waiting for a CPU since :meth:`start`.
+
+        A busy machine makes this grow; the wall-clock backstop adds it back, so
+        only time the child itself spent (computing, sleeping, blocking) counts.
+        """
+        return max(0.0, queued_seconds(self.pid) - self._queued_start)
 
     def own(self) -> float:
         """The child's own CPU seconds since :meth:`start` (cheap)."""

@@ -12,10 +12,9 @@ grading process died has its lease run out, and another grader takes it.
 from __future__ import annotations
 
 import os
-import sys
 import threading
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from autograder.assignment import checks_digest, load_assignment
 from autograder.batch import error_result

@@ -99,7 +99,7 @@ PROBLEMS: dict[str, tuple[object, dict[str, object]]] = {
     "infinite-loop": (nb("while True:\n    pass", SOLUTION),
                       {"score": "1", "outcome": "timeout", "contains": ["time limit"]}),
     "loop-when-called": (nb(SOLUTION, "def convex_hull(points):\n    while True:\n        pass"),
-                         {"score": "partial", "outcome": "graded", "contains": ["did not return within", "not called again"]}),
+                         {"score": "partial", "outcome": "graded", "contains": ["s of CPU time", "ran out of time on"]}),
     "exits": (nb("import sys\nsys.exit(3)", "exit()", SOLUTION), {"score": "1", "outcome": "graded"}),
     "hard-exit": (nb("import os\nos._exit(1)", SOLUTION), {"score": "1", "outcome": "crashed"}),
     "exit-when-called": (nb(SOLUTION, "import os\ndef convex_hull(points):\n    os._exit(0)"),
