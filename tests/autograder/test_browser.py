@@ -10,102 +10,28 @@ The screenshots are kept under pytest's temporary folder; their paths are printe
 
 from __future__ import annotations
 
-import base64
 import io
-import json
-import shutil
-import socket
 import subprocess
-import time
-import urllib.error
-import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+
 
 import numpy as np
 import pytest
 
 from autograder.feedback import write_feedback
 from autograder.results import Attachment, CellError, CheckResult, SubmissionResult
+from tests.support.webdriver import CHROMEDRIVER, CHROMIUM, WebDriver, start_chromedriver
 
 pytestmark = pytest.mark.browser
-
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMEDRIVER = shutil.which("chromedriver")
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--disable-dev-shm-usage", "--hide-scrollbars"]
-
-
-class WebDriver:
-    """The few WebDriver commands the test needs, over chromedriver's HTTP interface."""
-
-    def __init__(self, port: int, profile: Path) -> None:
-        self.base = f"http://127.0.0.1:{port}"
-        caps = {"browserName": "chrome", "goog:chromeOptions": {
-            "binary": CHROMIUM, "args": [*FLAGS, f"--user-data-dir={profile}"]}}
-        self.session = self._call("POST", "/session", {"capabilities": {"alwaysMatch": caps}})["sessionId"]
-
-    def _call(self, method: str, path: str, body: dict[str, Any] | None = None) -> Any:
-        data = json.dumps(body if body is not None else {}).encode() if method == "POST" else None
-        request = urllib.request.Request(self.base + path, data=data, method=method,
-                                         headers={"Content-Type": "application/json"})
-        try:
-            with urllib.request.urlopen(request, timeout=60) as response:
-                return json.loads(response.read())["value"]
-        except urllib.error.HTTPError as exc:
-            raise AssertionError(f"WebDriver {method} {path}: {exc.read()[:2000]!r}") from None
-
-    def command(self, method: str, path: str, body: dict[str, Any] | None = None) -> Any:
-        return self._call(method, f"/session/{self.session}{path}", body)
-
-    def open(self, url: str) -> None:
-        self.command("POST", "/url", {"url": url})
-
-    def run(self, script: str, *args: Any) -> Any:
-        return self.command("POST", "/execute/sync", {"script": script, "args": list(args)})
-
-    def resize(self, width: int, height: int) -> None:
-        self.command("POST", "/window/rect", {"width": width, "height": height})
-
-    def screenshot(self, path: Path) -> Path:
-        path.write_bytes(base64.b64decode(self.command("GET", "/screenshot")))
-        return path
-
-    def quit(self) -> None:
-        try:
-            self._call("DELETE", f"/session/{self.session}")
-        except (AssertionError, OSError):
-            pass
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
 
 @pytest.fixture(scope="module")
 def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[WebDriver]:
     if not (CHROMIUM and CHROMEDRIVER):
         pytest.skip("headless Chromium is not installed: apt-get install chromium chromium-driver "
                     "(.ci/run does this in CI)")
-    port = _free_port()
-    log = tmp_path_factory.mktemp("chromedriver") / "chromedriver.log"
-    driver = subprocess.Popen([CHROMEDRIVER, f"--port={port}", f"--log-path={log}"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    driver, web = start_chromedriver(tmp_path_factory.mktemp("chromedriver"))
     try:
-        deadline = time.monotonic() + 20
-        while True:
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/status", timeout=2):
-                    break
-            except OSError:
-                if time.monotonic() > deadline or driver.poll() is not None:
-                    raise AssertionError(f"chromedriver did not start; see {log}") from None
-                time.sleep(0.05)
-        web = WebDriver(port, tmp_path_factory.mktemp("chromium-profile"))
         try:
             yield web
         finally:
