@@ -119,7 +119,7 @@ def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.Mo
     from autograder.sandbox import IsolationSupport
 
     note = "Landlock is not available (kernel ABI 0): file and network restrictions are off."
-    monkeypatch.setattr(cli, "probe_support",
+    monkeypatch.setattr("autograder.sandbox.probe_support",
                         lambda: IsolationSupport(landlock_abi=0, is_root=True,
                                                  can_unshare_net=True, notes=(note,)))
     monkeypatch.setattr(cli, "_check", lambda args: 0)

@@ -184,7 +184,11 @@ def test_ordinary_user_installed_package_assignment_outside(
     if venv.exists():
         shutil.rmtree(venv)
     subprocess.run(["chmod", "-R", "a+rwX", str(cache)], check=False)  # root filled it so far
-    env = envs.make_venv(venv, install=[str(repo), str(repo / "reference")], python=python,
+    source = repo
+    if user is not None:  # the user builds from a copy of their own (pip writes egg-info there)
+        source = envs.copy_repository(workspace / "user-src")
+        envs.give_to(user, source)
+    env = envs.make_venv(venv, install=[str(source), str(source / "reference")], python=python,
                          user=user, cache=cache)
     probe = env.run("python", "-c", "import os, autograder; print(os.geteuid(), autograder.__file__)",
                     cwd=workspace)

@@ -153,9 +153,7 @@ def user_env() -> Iterator[envs.Env]:
     user = envs.ordinary_user()
     top = envs.shared_tempdir("numgrade-problems-")
     source = envs.copy_repository(top / "src")
-    for folder, _, files in os.walk(top):  # the user builds in src and creates the venv
-        for path in [folder, *(os.path.join(folder, name) for name in files)]:
-            shutil.chown(path, user, user)
+    envs.give_to(user, top)  # the user builds in src and creates the venv
     install = [str(source)] + ([str(source / "reference")]
                                if (source / "reference" / "pyproject.toml").exists() else [])
     env = envs.make_venv(top / "venv", install=install, python="/usr/bin/python3", user=user)

@@ -78,6 +78,14 @@ def copy_repository(target: Path) -> Path:
     return target
 
 
+def give_to(user: str, top: Path) -> Path:
+    """Make ``user`` the owner of everything under ``top`` (a build writes into its source)."""
+    for folder, _, files in os.walk(top):
+        for path in [folder, *(os.path.join(folder, name) for name in files)]:
+            shutil.chown(path, user, user)
+    return top
+
+
 def make_venv(where: Path, *, install: list[str], python: str = sys.executable,
               user: str | None = None, stack: bool = True, system_site: bool = False,
               cache: Path | None = None) -> Env:
