@@ -43,8 +43,9 @@ from autograder.errors import (
 )
 from autograder.sandbox import IsolationPolicy
 
-#: how long the warm parent may take to import numpy, scipy and matplotlib
-STARTUP_TIMEOUT = 120.0
+#: how long the warm parent may take to import numpy, scipy and matplotlib (our own
+#: process, not student code: generous, so a loaded machine is slow but never wrong)
+STARTUP_TIMEOUT = 600.0
 #: how many cells that hang or kill the worker are skipped before giving up on a notebook
 MAX_RESTARTS = 2
 #: how many times a submission's worker is restarted after a call hung or killed it
