@@ -7,6 +7,7 @@ distributed one later) only has to call :meth:`Grader.grade` per file.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import importlib.util
@@ -16,7 +17,7 @@ import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import pytest
 
@@ -267,8 +268,7 @@ class Grader:
             status = run_pytest(self.check_files, self.assignment.root, plugin)
         finally:
             forget_check_modules(self.assignment.root / "checks")
-        if not plugin.collection_errors and not plugin.results \
-                and status != pytest.ExitCode.INTERRUPTED:
+        if not plugin.collection_errors and status == pytest.ExitCode.NO_TESTS_COLLECTED:
             plugin.collection_errors.append("no checks were collected")
         if plugin.collection_errors:  # pytest reports these as "interrupted" too
             raise AssignmentError(
@@ -367,10 +367,6 @@ def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> i
         "--assert=plain", "--import-mode=importlib",
         "-W", "ignore::pytest.PytestAssertRewriteWarning",
     ]
-    # Only the grading plugin: third-party plugins cost startup time and could
-    # change how checks run (set just for this call; the caller's env is restored).
-    previous = os.environ.get("PYTEST_DISABLE_PLUGIN_AUTOLOAD")
-    os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = "1"
     # When the grader itself runs inside pytest (an instructor's test-suite), that
     # session's assertion rewriter would rewrite the checks and put their source in
     # failure messages; it is taken out of the import system for the inner run.
@@ -378,13 +374,41 @@ def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> i
     for hook in hooks:
         sys.meta_path.remove(hook)
     try:
-        return int(pytest.main(args, plugins=[plugin]))
+        with _checks_environment():
+            return int(pytest.main(args, plugins=[plugin]))
     finally:
         sys.meta_path[0:0] = hooks
-        if previous is None:
-            del os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"]
-        else:
-            os.environ["PYTEST_DISABLE_PLUGIN_AUTOLOAD"] = previous
+
+
+#: pytest's own environment variables, as the check run sees them: only the grading
+#: plugin (third-party plugins cost start-up time and could change how checks run),
+#: and none of the caller's options (a CI job's ``PYTEST_ADDOPTS=--junitxml=...``
+#: would otherwise be an unknown option of the inner run and fail every grading).
+_CHECKS_ENVIRONMENT: dict[str, str | None] = {
+    "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1",
+    "PYTEST_ADDOPTS": None,
+    "PYTEST_PLUGINS": None,
+    "PYTEST_DEBUG": None,
+}
+
+
+@contextlib.contextmanager
+def _checks_environment() -> Iterator[None]:
+    """Set :data:`_CHECKS_ENVIRONMENT` for one check run; the caller's values come back after."""
+    saved = {name: os.environ.get(name) for name in _CHECKS_ENVIRONMENT}
+
+    def put(values: dict[str, str | None]) -> None:
+        for name, value in values.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+    put(_CHECKS_ENVIRONMENT)
+    try:
+        yield
+    finally:
+        put(saved)
 
 
 #: how a note that asks for a person starts (the class summary lists such submissions)
@@ -464,8 +488,12 @@ def _require_regular_file(path: Path) -> None:
     """
     try:
         mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        raise NotebookError(f"{path.name!r} does not exist. Submit your .ipynb notebook file.",
+                            kind="unreadable") from None
     except OSError as exc:
-        raise NotebookError(f"The file could not be read ({exc.strerror}).", kind="unreadable") from None
+        raise NotebookError(f"{path.name!r} could not be read ({exc.strerror}). Submit it again.",
+                            kind="unreadable") from None
     if stat.S_ISLNK(mode):
         raise NotebookError("This submission is a symbolic link, not a notebook file; submit "
                             "the .ipynb file itself.", kind="not-regular")

@@ -113,7 +113,11 @@ def test_ci_run_end_to_end(tmp_path: Path) -> None:
         [sys.executable, "-m", "autograder", "grade", "hull", str(EXAMPLES / "wrong-clockwise.ipynb"),
          str(EXAMPLES / "partial-only-orientation.ipynb"), "--out", str(out), "--jobs", "2",
          "--ci", "--junit", str(junit)],
-        capture_output=True, text=True, check=False, timeout=300, env={**os.environ, "GITHUB_STEP_SUMMARY": str(summary)})
+        capture_output=True, text=True, check=False, timeout=300,
+        # A CI job's own pytest settings must not reach the grader's check runs.
+        env={**os.environ, "GITHUB_STEP_SUMMARY": str(summary),
+             "PYTEST_ADDOPTS": f"--junitxml={tmp_path / 'outer.xml'} --durations=5",
+             "PYTEST_PLUGINS": "a_plugin_that_does_not_exist"})
     assert proc.returncode == 0, proc.stderr
     points = [line for line in proc.stdout.splitlines() if line.startswith("Points ")]
     assert sorted(points) == ["Points 10/36", "Points 26/36"]
