@@ -12,6 +12,7 @@ __all__ = [
     "AutograderError",
     "UsageError",
     "AssignmentError",
+    "UploadRejected",
     "NotebookError",
     "ProtocolError",
     "StudentError",
@@ -38,6 +39,15 @@ class UsageError(AutograderError, ValueError):
 
 class AssignmentError(UsageError):
     """An assignment folder is missing, incomplete or inconsistent."""
+
+
+class UploadRejected(UsageError):
+    """An upload the service refuses; ``status`` is the HTTP status to answer with."""
+
+    def __init__(self, message: str, *, status: int = 400, retry_after: int | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+        self.retry_after = retry_after
 
 
 class NotebookError(AutograderError, ValueError):

@@ -69,6 +69,7 @@ __all__ = [
     "IsolationSupport",
     "Limits",
     "clean_environment",
+    "coverable_folders",
     "enter_sandbox",
     "probe_support",
     "readable_paths",
@@ -606,7 +607,7 @@ def enter_sandbox(
     workdir = _check_arguments(policy, workdir, slot)
     notes: list[str] = []
     _attempt(notes, "new session", os.setsid)
-    private_ipc = _apply_namespaces(policy, workdir, notes)
+    private_ipc = _apply_namespaces(policy, workdir, exclude, notes)
     notes.append(_replace_environment(clean_environment(workdir)))
     os.chdir(workdir)
     ruleset = _prepare_landlock(policy, workdir, exclude, notes)
@@ -622,20 +623,46 @@ def enter_sandbox(
     return tuple(notes)
 
 
-def _apply_namespaces(policy: IsolationPolicy, workdir: Path, notes: list[str]) -> bool:
+def _apply_namespaces(policy: IsolationPolicy, workdir: Path, exclude: Sequence[Path],
+                      notes: list[str]) -> bool:
     """Private IPC/UTS/mount namespaces and the disk quota; True if IPC is private.
 
     An ordinary user also gets an empty network namespace here, inside the same
-    user namespace (root gets one in :func:`_apply_identity`).
+    user namespace (root gets one in :func:`_apply_identity`). Excluded folders
+    that hold nothing the child needs are covered by empty mounts.
     """
     if not policy.namespaces:
         notes.append("IPC/mount namespaces and disk quota off by policy")
         return False
     result = syscalls.private_namespaces(
         workdir, quota_bytes=policy.limits.disk_bytes,
-        network=policy.network_namespace and os.geteuid() != 0)
+        network=policy.network_namespace and os.geteuid() != 0,
+        hide=coverable_folders(exclude, workdir, policy))
     notes.extend(result.notes)
     return result.ipc
+
+
+def coverable_folders(exclude: Sequence[Path], workdir: Path,
+                      policy: IsolationPolicy) -> tuple[Path, ...]:
+    """The excluded folders an empty mount may cover in the child.
+
+    Only folders outside every readable root (so not a forbidden library inside
+    site-packages, which Landlock alone keeps out) and holding neither a readable
+    root (a venv inside the repository) nor the working directory; none inside
+    another.
+    """
+    extra = [Path(p) for p in policy.allowed_read]
+    whole = readable_paths([], extra=extra)  # the roots before any hole is cut
+    needed = [*whole, *readable_paths(exclude, extra=extra), _resolve(workdir)]
+    found: list[Path] = []
+    for folder in sorted({_resolve(p) for p in exclude}, key=lambda p: len(p.parts)):
+        if not folder.is_dir() or folder == Path("/") \
+                or any(folder.is_relative_to(f) for f in found) \
+                or any(folder.is_relative_to(root) for root in whole) \
+                or any(path.is_relative_to(folder) for path in needed):
+            continue
+        found.append(folder)
+    return tuple(found)
 
 
 def _join_cgroup(policy: IsolationPolicy, slot: int, notes: list[str]) -> None:

@@ -34,6 +34,7 @@ import errno
 import functools
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +52,7 @@ CLONE_NEWIPC = 0x08000000
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWNET = 0x40000000
 # <sys/mount.h>
+MS_RDONLY = 0x1
 MS_NOSUID = 0x2
 MS_NODEV = 0x4
 MS_NOEXEC = 0x8
@@ -105,7 +107,8 @@ class NamespaceResult:
     notes: tuple[str, ...]
 
 
-def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False) -> NamespaceResult:
+def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False,
+                       hide: Sequence[Path] = ()) -> NamespaceResult:
     """Give the calling (single-threaded, forked) process private namespaces.
 
     As root: ``unshare(IPC | UTS | mount)``. As an ordinary user: the same inside a
@@ -122,6 +125,11 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
     network : bool
         Also an empty network namespace (only ``lo``, down): a second wall behind
         the seccomp filter. Root's children get theirs in :mod:`autograder.sandbox`.
+    hide : sequence of Path
+        Folders to cover with an empty read-only tmpfs in the child's mount
+        namespace (the checks, the repository, other submissions): Landlock
+        refuses reading them but not ``stat``, so without this a child could
+        still learn which files exist there, their sizes and times.
 
     Returns
     -------
@@ -150,6 +158,15 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
         quota_bytes = 0
     else:
         notes.append(f"disk quota: tmpfs of {quota_bytes} bytes over the working directory")
+    if hide:
+        try:
+            for folder in hide:
+                _mount("tmpfs", str(folder), "tmpfs",
+                       MS_RDONLY | MS_NOSUID | MS_NODEV | MS_NOEXEC, "size=4k,nr_inodes=2,mode=0555")
+        except OSError as exc:
+            notes.append(f"covering excluded folders skipped at {folder}: {exc.strerror or exc}")
+        else:
+            notes.append(f"excluded folders covered by empty mounts: {len(hide)}")
     if not is_root:
         _drop_namespace_capabilities()
     return NamespaceResult(True, quota_bytes, tuple(notes))

@@ -29,10 +29,11 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
+from autograder.errors import UploadRejected
 from autograder.feedback import FEEDBACK_NAME
 from autograder.service import auth, gradebook, jobqueue
 from autograder.service.course import AssignmentPolicy, Course
-from autograder.service.intake import UploadRejected, accept
+from autograder.service.intake import accept
 from autograder.service.models import Extension, Job, Submission, User, utcnow
 from autograder.service.standing import class_standings, final_score, standing, time_left
 from autograder.service.storage import Storage

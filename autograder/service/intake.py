@@ -14,22 +14,13 @@ from pathlib import Path
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from autograder.errors import NotebookError, UsageError
+from autograder.errors import NotebookError, UploadRejected
 from autograder.notebook import read_notebook
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
 from autograder.service.standing import deadline_for
 from autograder.service.storage import Storage
-
-
-class UploadRejected(UsageError):
-    """An upload the service refuses; ``status`` is the HTTP status to answer with."""
-
-    def __init__(self, message: str, *, status: int = 400, retry_after: int | None = None) -> None:
-        super().__init__(message)
-        self.status = status
-        self.retry_after = retry_after
 
 
 def check_notebook(data: bytes, max_bytes: int) -> None:

@@ -29,12 +29,19 @@ from autograder.sandbox import (
     IsolationPolicy,
     Limits,
     clean_environment,
+    coverable_folders,
     enter_sandbox,
     probe_support,
     readable_paths,
 )
+from autograder.session import claim_slot
 
 REPO = Path(__file__).resolve().parents[2]
+# Slots claimed as a grader claims them and held while the tests run: a grader running
+# at the same time (another test run, a CI job) never uses or sweeps these user ids,
+# and these children never share a user id with a grader's. Tests name them 0-5.
+_CLAIMED = [claim_slot(300) for _ in range(6)]
+SLOTS = [slot for slot, _ in _CLAIMED]
 CHILD_DEADLINE = 20.0  # seconds of wall-clock time a forked child may take
 SECRET = "hunter2-not-for-students"
 
@@ -85,7 +92,7 @@ def run_sandboxed(
     pid = os.fork()
     if pid == 0:  # the child never returns into pytest
         os.close(read_fd)
-        _child_main(action, write_fd, policy, workdir, slot, exclude)
+        _child_main(action, write_fd, policy, workdir, SLOTS[slot], exclude)
     os.close(write_fd)
     try:
         data, status, timed_out = _collect(pid, read_fd, deadline)
@@ -329,9 +336,50 @@ def test_repository_and_reference_package_are_unreadable(workdir: Path) -> None:
         }
 
     value = run_sandboxed(action, workdir, exclude=[REPO]).value
-    assert value["design"] == value["source"] == "PermissionError"
+    # FileNotFoundError where the repository is covered by an empty mount (see below)
+    assert value["design"] == value["source"] in ("PermissionError", "FileNotFoundError")
     if not preloaded:
         assert value["import"] in ("PermissionError", "ModuleNotFoundError", "ImportError")
+
+
+def test_excluded_folders_are_covered_so_not_even_their_names_show(tmp_path: Path,
+                                                                    workdir: Path) -> None:
+    """Landlock refuses reading a file but not ``stat``: an empty mount hides names and sizes."""
+    support = probe_support()
+    if not (support.is_root or support.user_namespaces):
+        pytest.skip("no mount namespace for this user: excluded folders are unreadable "
+                    "(Landlock) but their names can be looked up")
+    hidden = tmp_path / "assignment" / "checks" / "hidden" / "test_secret.py"
+    hidden.parent.mkdir(parents=True)
+    hidden.write_text("ANSWER = 42\n")
+    assert coverable_folders([tmp_path / "assignment"], workdir, DEFAULT) == (
+        (tmp_path / "assignment").resolve(),)
+
+    def action() -> dict[str, object]:
+        return {"stat": _try(lambda: os.stat(hidden)), "exists": hidden.exists(),
+                "parent": _try(lambda: os.stat(hidden.parent))}
+
+    outcome = run_sandboxed(action, workdir, exclude=[tmp_path / "assignment"])
+    assert outcome.value == {"stat": "FileNotFoundError", "exists": False,
+                             "parent": "FileNotFoundError"}
+    assert any("covered by empty mounts: 1" in n for n in outcome.report["notes"])
+    assert hidden.read_text() == "ANSWER = 42\n", "the grader's own view is unchanged"
+
+
+def test_only_folders_without_anything_the_child_needs_are_covered(tmp_path: Path,
+                                                                   workdir: Path) -> None:
+    """Not a folder holding the Python install (a venv in the repository), the working
+    directory, or a folder inside an allowed root (a forbidden library in site-packages)."""
+    stdlib = Path(json.__file__).resolve().parent.parent
+    holding_python = stdlib.parent  # .../lib: holds the standard library
+    inside_root = Path(json.__file__).resolve().parent  # like a forbidden library's folder
+    checks = tmp_path / "checks"
+    checks.mkdir()
+    (checks / "inner").mkdir()
+    policy = IsolationPolicy()
+    got = coverable_folders([holding_python, inside_root, tmp_path, checks, checks / "inner",
+                             tmp_path / "missing"], workdir, policy)
+    assert got == (checks.resolve(),)
 
 
 def _try(action: Callable[[], object]) -> str:
@@ -524,7 +572,7 @@ def test_inherited_environment_block_is_wiped(workdir: Path) -> None:
         from autograder.sandbox import IsolationPolicy, enter_sandbox
         proc = Path("/proc/self/environ")
         before = "{SECRET}" in proc.read_text("latin-1")
-        enter_sandbox(IsolationPolicy(), Path({str(workdir)!r}), slot=4)
+        enter_sandbox(IsolationPolicy(), Path({str(workdir)!r}), slot={SLOTS[4]})
         after = "{SECRET}" in proc.read_text("latin-1")
         sys.stdout.write(json.dumps([before, after]))
     """)
@@ -547,8 +595,8 @@ def test_child_runs_as_the_slot_user(workdir: Path) -> None:
                 "caps": [int(status[key], 16) for key in ("CapEff", "CapPrm", "CapBnd", "CapInh")]}
 
     value = run_sandboxed(action, workdir, policy=policy, slot=5).value
-    assert value["ids"] == [61005] * 4
+    assert value["ids"] == [61000 + SLOTS[5]] * 4
     assert value["groups"] == []
     dac_read_search = 1 << 2
     assert value["caps"] == [dac_read_search, dac_read_search, dac_read_search, 0]
-    assert value["workdir_uid"] == 61005
+    assert value["workdir_uid"] == 61000 + SLOTS[5]
