@@ -51,6 +51,9 @@ def hydra(beacon: int) -> None:
     Each generation writes a byte to ``beacon``; the pipe reaches end-of-file only
     when no generation holds it any more, which is how the tests tell that none is
     left (a listing of /proc can miss a process whose pid changes all the time).
+    Once the test has closed the read end, the next write fails and the hydra ends
+    itself: a sweep that fails its test must not leave it eating the machine (and
+    every later test's time) for good.
     """
     os.set_blocking(beacon, False)
     while True:
@@ -63,6 +66,8 @@ def hydra(beacon: int) -> None:
         try:
             os.setsid()
             os.write(beacon, b".")
+        except BrokenPipeError:
+            os._exit(0)
         except OSError:
             pass
 
