@@ -11,14 +11,22 @@ An assignment's checks are ordinary pytest functions over the fixtures of
   :func:`is_rotation_reversed`), right on NaN and infinities;
 * named datasets: :class:`Dataset` holds how to build the data, the points it
   is worth, its tolerance and the reason for that tolerance, and a hint;
-  :func:`over_datasets` parametrises a check over a mapping of them, each item
-  carrying its points and named by its key;
+  :func:`over_datasets` parametrises a check over a mapping of them (or some
+  of them), each item carrying its points and named by its key;
+* partial credit for a right answer that breaks a convention (clockwise,
+  1-based, transposed, ...): one :class:`Conventions` table per assignment says
+  what each broken convention keeps of the points; :meth:`Conventions.record`
+  collects what one check found (a :class:`Broken`) and ends the check;
+* calling the student: :func:`explain_errors` turns an exception of a known
+  type (``OverflowError``, ...) into a failure that says how to avoid it;
+  :func:`call_for_figure` calls a plotting function and finds its figure;
 * text for messages: :func:`show_number` (every digit that matters, so
   ``0.9999999`` never reads as ``1``), :func:`show_point`, :func:`show_list`,
-  :func:`show_points`, :func:`plural`, :func:`sentence`;
-* pictures: :func:`figure_png` (the PNG inside figure data),
-  :func:`render_png` (a figure drawn by the check) and :func:`side_by_side`
-  (the student's picture beside a reference drawing).
+  :func:`show_points`, :func:`plural`, :func:`sentence`, :func:`sentences`;
+* pictures: :func:`is_figure` (figure data from the boundary),
+  :func:`figure_png` (the PNG inside figure data), :func:`render_png` (a
+  figure drawn by the check) and :func:`side_by_side` (the student's picture
+  beside a reference drawing).
 
 Assertion rewriting is off while checks run, so a check fails with its message
 only: raise :class:`CheckFailure` (or ``assert cond, "message"``) with text a
@@ -48,9 +56,11 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Generic, TypeGuard, TypeVar
 
 import numpy as np
 import pytest
@@ -65,29 +75,36 @@ from autograder.compare import (
     same_cycle,
 )
 from autograder.curves import decode_png, render_side_by_side
-from autograder.errors import CheckFailure
+from autograder.errors import CheckFailure, StudentException
 from autograder.plugin import Credit, Feedback
 from autograder.proxy import Student
 
 __all__ = [
+    "Broken",
     "CheckFailure",
+    "Conventions",
     "Credit",
     "Dataset",
     "Feedback",
+    "FigureData",
     "Student",
+    "call_for_figure",
     "decode_png",
     "describe",
     "expect_array",
     "expect_close",
     "expect_equal",
     "expect_int",
+    "explain_errors",
     "figure_png",
+    "is_figure",
     "is_rotation_reversed",
     "over_datasets",
     "plural",
     "render_png",
     "same_cycle",
     "sentence",
+    "sentences",
     "show_list",
     "show_number",
     "show_point",
@@ -96,6 +113,10 @@ __all__ = [
 ]
 
 T = TypeVar("T")
+
+#: Figure data as it comes back from the student's process: a dict with the
+#: figure's ``axes`` (each with its ``lines``, ``collections``, ...) and its ``png``.
+FigureData = Mapping[str, Any]
 
 
 # ---------------------------------------------------------------------------
@@ -147,8 +168,8 @@ class Dataset(Generic[T]):
 
 
 def over_datasets(datasets: Mapping[str, Any], argname: str = "name", *,
-                  points: float | Callable[[Any], float] | None = None
-                  ) -> pytest.MarkDecorator:
+                  points: float | Callable[[Any], float] | None = None,
+                  only: Iterable[str] | None = None) -> pytest.MarkDecorator:
     """Parametrise a check over ``datasets``, each item named by its key and worth its points.
 
     Parameters
@@ -161,6 +182,10 @@ def over_datasets(datasets: Mapping[str, Any], argname: str = "name", *,
         Override the points of every item (a number), or compute them from
         the dataset (a function); default: each dataset's ``points``
         attribute, or 1 for a value without one.
+    only : iterable of str, optional
+        Run the check over these keys only, in this order (a check that
+        needs some of an assignment's datasets); each must be a key of
+        ``datasets``.
 
     Returns
     -------
@@ -170,15 +195,159 @@ def over_datasets(datasets: Mapping[str, Any], argname: str = "name", *,
     """
     if not datasets:
         raise ValueError("`datasets` must name at least one dataset.")
+    keys = list(datasets) if only is None else list(only)
+    unknown = [key for key in keys if key not in datasets]
+    if unknown or not keys:
+        raise ValueError(f"`only` must name datasets among {show_list(datasets, limit=20)}; "
+                         f"got {show_list(keys, limit=20)}.")
 
     def weight(value: Any) -> float:
         if points is None:
             return float(getattr(value, "points", 1))
         return float(points(value) if callable(points) else points)
 
-    params = [pytest.param(key, marks=pytest.mark.points(weight(value)), id=key)
-              for key, value in datasets.items()]
+    params = [pytest.param(key, marks=pytest.mark.points(weight(datasets[key])), id=key)
+              for key in keys]
     return pytest.mark.parametrize(argname, params)
+
+
+# ---------------------------------------------------------------------------
+# partial credit for broken conventions
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Conventions:
+    """What a right answer keeps of a check's points when it breaks a convention.
+
+    One table per assignment, written once beside its checks. A check collects
+    what it finds with :meth:`record` and ends with :meth:`Broken.finish`;
+    several broken conventions multiply their fractions.
+
+    Attributes
+    ----------
+    fractions : mapping of str to float
+        Convention (``"clockwise"``, ``"one-based"``, ...) -> the share of the
+        points a right answer keeps when it breaks it, in (0, 1).
+
+    Example
+    -------
+    ::
+
+        CONVENTIONS = Conventions({"clockwise": 0.5, "closed": 0.75})
+
+        broken = CONVENTIONS.record()
+        broken.note("clockwise", "your hull is right but clockwise")
+        broken.finish(credit)  # credit.partial(0.5, "Your hull is right but clockwise.")
+    """
+
+    fractions: Mapping[str, float]
+
+    def __post_init__(self) -> None:
+        for key, value in self.fractions.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not 0 < value < 1:
+                raise ValueError(f"The fraction kept for {key!r} must lie strictly between "
+                                 f"0 and 1; got {value!r}.")
+        object.__setattr__(self, "fractions", MappingProxyType(dict(self.fractions)))
+
+    def record(self) -> Broken:
+        """An empty record of the conventions one check finds broken."""
+        return Broken(self)
+
+    def partial(self, credit: Credit, key: str, message: str) -> None:
+        """End the check now: one convention broken, ``credit.partial(fraction, message)``."""
+        broken = self.record()
+        broken.note(key, message)
+        broken.finish(credit)
+
+
+@dataclass
+class Broken:
+    """The conventions one check found broken: key -> the first message about it."""
+
+    conventions: Conventions
+    notes: dict[str, str] = field(default_factory=dict)
+
+    def note(self, key: str, message: str, *, replace: bool = False) -> None:
+        """Record ``key`` as broken; the first message stays unless ``replace``."""
+        if key not in self.conventions.fractions:
+            raise KeyError(f"{key!r} is not a convention of this assignment; known: "
+                           f"{', '.join(self.conventions.fractions)}.")
+        if replace or key not in self.notes:
+            self.notes[key] = message
+
+    def __len__(self) -> int:
+        return len(self.notes)
+
+    @property
+    def fraction(self) -> float:
+        """The share of the points kept: the product of the broken conventions' fractions."""
+        return math.prod(self.conventions.fractions[key] for key in self.notes)
+
+    def message(self) -> str:
+        """Every note, each as a sentence, in the order they were found."""
+        return sentences(self.notes.values())
+
+    def finish(self, credit: Credit) -> None:
+        """End the check: nothing (full points) or ``credit.partial(fraction, message)``."""
+        if self.notes:
+            credit.partial(self.fraction, self.message())
+
+
+# ---------------------------------------------------------------------------
+# calling the student
+# ---------------------------------------------------------------------------
+
+
+@contextmanager
+def explain_errors(call: str, hints: Mapping[str, str], *,
+                   traceback: bool = False) -> Iterator[None]:
+    """Explain the exceptions of known types that the student's code raises inside the block.
+
+    ``hints`` maps an exception type's name (``"OverflowError"``) to advice on
+    avoiding it. Such an exception ends the check with ``"{call} raised
+    {type}: {message}. {hint}"`` (and the student's traceback if
+    ``traceback``); exceptions of other types pass through unchanged (the
+    plugin reports them with their traceback)::
+
+        with explain_errors(f"equispaced_weights({n})", {"OverflowError": HINT}):
+            w = student.equispaced_weights(n)
+    """
+    try:
+        yield
+    except StudentException as exc:
+        kind = exc.exc_type or str(exc).split(" raised ", 1)[-1].split(":", 1)[0]
+        if kind not in hints:
+            raise
+        detail = exc.detail or str(exc).split(": ", 1)[-1]
+        text = sentence(f"{call} raised {kind}: {detail}".rstrip(" .")) + " " + hints[kind]
+        if traceback and exc.traceback:
+            text += f"\n\n{exc.traceback}"
+        raise CheckFailure(text.strip()) from None
+
+
+def call_for_figure(student: Student, fn: str, *args: object, feedback: Feedback | None = None,
+                    label: str = "your plot") -> tuple[object, FigureData | None]:
+    """Call the student's plotting function ``fn(*args)`` and find the figure it drew.
+
+    Returns
+    -------
+    value : object
+        What ``fn`` returned (a figure returns as :data:`FigureData`).
+    figure : FigureData or None
+        The figure to judge: the returned one, else the last figure the call
+        left open (a function that forgot ``return fig``), else None.
+
+    With ``feedback``, the figure's picture is attached under ``label``.
+    """
+    value, opened = student.call(fn, *args, figures=True)
+    figure = value if is_figure(value) else next(
+        (f for f in reversed(opened) if is_figure(f)), None)
+    png = figure_png(figure)
+    if feedback is not None and png:
+        feedback.image(label, png)
+    return value, figure
 
 
 # ---------------------------------------------------------------------------
@@ -254,9 +423,19 @@ def sentence(text: str) -> str:
     return text if text.endswith((".", "!", "?")) else text + "."
 
 
+def sentences(parts: Iterable[str]) -> str:
+    """Clauses joined as sentences (each by :func:`sentence`), empty ones left out."""
+    return " ".join(sentence(part) for part in parts if part.strip())
+
+
 # ---------------------------------------------------------------------------
 # pictures
 # ---------------------------------------------------------------------------
+
+
+def is_figure(value: object) -> TypeGuard[FigureData]:
+    """Whether ``value`` is figure data from the boundary (a mapping with a list of axes)."""
+    return isinstance(value, Mapping) and isinstance(value.get("axes"), list)
 
 
 def figure_png(figure: Any) -> bytes | None:

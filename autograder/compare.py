@@ -46,25 +46,30 @@ def _short(value: Any, width: int = 80) -> str:
 
 
 def expect_array(got: Any, *, shape: Sequence[int | None] | None = None,
-                 dtype_kind: str = "biuf", name: str = "the result") -> NDArray[Any]:
+                 dtype_kind: str = "biuf", name: str = "the result",
+                 hint: str = "") -> NDArray[Any]:
     """Return ``got`` as an array, checking its element kind and shape.
 
-    ``shape`` may hold ``None`` for any length in that dimension.
+    ``shape`` may hold ``None`` for any length in that dimension. ``hint``, if
+    given, ends every failure message (say what the answer should look like:
+    "Return the row numbers of the corners, like [2, 1, 4].").
     """
+    def fail(message: str) -> CheckFailure:
+        return CheckFailure(f"{message} {hint}" if hint else message)
+
     if got is None or isinstance(got, (str, bytes, dict)):
-        raise CheckFailure(f"{name} should be an array-like of {_kinds(dtype_kind)}; "
-                           f"got {describe(got)}.")
+        raise fail(f"{name} should be an array-like of {_kinds(dtype_kind)}; got {describe(got)}.")
     try:
         arr = np.asarray(got)
     except (ValueError, TypeError):
-        raise CheckFailure(f"{name} should be a rectangular array-like; got {describe(got)}.") from None
+        raise fail(f"{name} should be a rectangular array-like; got {describe(got)}.") from None
     if arr.dtype.kind not in dtype_kind:
-        raise CheckFailure(f"{name} should hold {_kinds(dtype_kind)}; got {describe(got)}.")
+        raise fail(f"{name} should hold {_kinds(dtype_kind)}; got {describe(got)}.")
     if shape is not None:
         ok = arr.ndim == len(shape) and all(w is None or w == n for w, n in zip(shape, arr.shape))
         if not ok:
             want = "(" + ", ".join("any" if w is None else str(w) for w in shape) + ")"
-            raise CheckFailure(f"{name} should have shape {want}; got shape {arr.shape}.")
+            raise fail(f"{name} should have shape {want}; got shape {arr.shape}.")
     return arr
 
 

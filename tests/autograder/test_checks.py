@@ -11,22 +11,29 @@ import pytest
 import autograder.checks as checks
 from autograder.checks import (
     CheckFailure,
+    Conventions,
+    Credit,
     Dataset,
+    call_for_figure,
     describe,
     expect_array,
     expect_close,
     expect_equal,
     expect_int,
+    explain_errors,
     figure_png,
+    is_figure,
     over_datasets,
     plural,
     sentence,
+    sentences,
     show_list,
     show_number,
     show_point,
     show_points,
     side_by_side,
 )
+from autograder.errors import PartialCredit, StudentException
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 INF, NAN = np.inf, np.nan
@@ -123,6 +130,16 @@ def test_expect_close_complex_and_integer_inputs():
 ])
 def test_type_comes_before_shape_and_values(got, words):
     assert words in failure(expect_close, got, [1.0, 2.0], rtol=0, atol=0)
+
+
+def test_expect_array_hint_ends_every_failure():
+    hint = "Return the row numbers, like [2, 1, 4]."
+    assert failure(expect_array, "abc", dtype_kind="iu", hint=hint).endswith(
+        f"; got a str ('abc'). {hint}")
+    assert failure(expect_array, [0.5], dtype_kind="iu", hint=hint).endswith(hint)
+    assert failure(expect_array, [[1, 2]], shape=(None,), hint=hint).endswith(
+        f"got shape (1, 2). {hint}")
+    assert "Return" not in failure(expect_array, [[1, 2]], shape=(None,))
 
 
 def test_shape_comes_before_values():
@@ -222,6 +239,114 @@ def test_over_datasets_decorates_a_check():
     assert mark.args[1][0].marks[0].args == (2.0,)
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnknownMarkWarning")
+def test_over_datasets_runs_over_some_datasets_in_the_given_order():
+    datasets = {"a": Dataset(lambda rng: 1, points=2), "b": Dataset(lambda rng: 2),
+                "c": Dataset(lambda rng: 3, points=3)}
+    argname, params = over_datasets(datasets, only=["c", "a"], points=1).args
+    assert [p.id for p in params] == ["c", "a"]
+    assert [p.marks[0].args for p in params] == [(1.0,), (1.0,)]
+    assert [p.marks[0].args for p in over_datasets(datasets, only=["c"]).args[1]] == [(3.0,)]
+    with pytest.raises(ValueError, match="`only` must name datasets"):
+        over_datasets(datasets, only=["a", "unseen"])
+    with pytest.raises(ValueError, match="`only`"):
+        over_datasets(datasets, only=[])
+
+
+# ---------------------------------------------------------------------------
+# partial credit for broken conventions
+# ---------------------------------------------------------------------------
+
+def partial(fn, *args, **kwargs) -> PartialCredit:
+    with pytest.raises(PartialCredit) as info:
+        fn(*args, **kwargs)
+    return info.value
+
+
+def test_broken_conventions_multiply_and_keep_the_first_message():
+    conventions = Conventions({"clockwise": 0.5, "closed": 0.75})
+    broken = conventions.record()
+    broken.finish(Credit())  # nothing broken: full points, the check goes on
+    broken.note("clockwise", "your hull is right but clockwise")
+    broken.note("clockwise", "a second message about the same convention")
+    broken.note("closed", "list each corner once.")
+    assert len(broken) == 2 and broken.fraction == 0.375
+    ended = partial(broken.finish, Credit())
+    assert ended.fraction == 0.375
+    assert str(ended) == "Your hull is right but clockwise. List each corner once."
+    broken.note("closed", "convex_hull(points) repeats its first corner", replace=True)
+    assert broken.message().endswith(" convex_hull(points) repeats its first corner.")
+    assert conventions.record().fraction == 1  # a fresh record per check
+
+
+def test_conventions_refuse_bad_fractions_and_unknown_keys():
+    for bad in (0, 1, 1.5, -0.5, True, "half"):
+        with pytest.raises(ValueError, match="strictly between 0 and 1"):
+            Conventions({"clockwise": bad})  # type: ignore[dict-item]
+    conventions = Conventions({"clockwise": 0.5})
+    with pytest.raises(KeyError, match="'one-based' is not a convention"):
+        conventions.record().note("one-based", "indices start at 0")
+    with pytest.raises(TypeError):
+        conventions.fractions["clockwise"] = 1.0  # type: ignore[index]  # read-only
+    ended = partial(conventions.partial, Credit(), "clockwise", "triangle 0 is clockwise")
+    assert (ended.fraction, str(ended)) == (0.5, "Triangle 0 is clockwise.")
+
+
+# ---------------------------------------------------------------------------
+# calling the student
+# ---------------------------------------------------------------------------
+
+def raise_student(exc_type: str, detail: str) -> None:
+    raise StudentException(f"weights raised {exc_type}: {detail}", traceback="Traceback: line 3",
+                           function="weights", exc_type=exc_type, detail=detail)
+
+
+def test_explain_errors_explains_known_exception_types_only():
+    hints = {"OverflowError": "Divide by the largest binomial first."}
+    with pytest.raises(CheckFailure) as info:
+        with explain_errors("weights(1100)", hints):
+            raise_student("OverflowError", "int too large to convert to float")
+    assert str(info.value) == ("weights(1100) raised OverflowError: int too large to convert "
+                               "to float. Divide by the largest binomial first.")
+    with pytest.raises(CheckFailure, match="Traceback: line 3"):
+        with explain_errors("weights(1100)", hints, traceback=True):
+            raise_student("OverflowError", "int too large")
+    with pytest.raises(StudentException):  # another type: reported by the plugin as it is
+        with explain_errors("weights(1100)", hints):
+            raise_student("ValueError", "bad n")
+    with explain_errors("weights(3)", hints):
+        pass  # no exception, nothing to explain
+
+
+class Plotting:
+    """A stand-in for the ``student`` fixture: ``call`` returns what it was given."""
+
+    def __init__(self, value: object, opened: list[object]) -> None:
+        self.value, self.opened = value, opened
+
+    def call(self, name: str, *args: object, figures: bool = False) -> tuple[object, list]:
+        assert figures
+        return self.value, self.opened
+
+
+def test_call_for_figure_finds_the_returned_or_the_last_drawn_figure():
+    png = _png()
+    returned, drawn = {"axes": [], "png": png}, {"axes": [{"lines": []}]}
+    images = []
+
+    class Attach:
+        def image(self, label: str, data: bytes) -> None:
+            images.append((label, data))
+
+    value, figure = call_for_figure(Plotting(returned, [drawn]), "plot", 3, feedback=Attach())
+    assert value is returned and figure is returned and images == [("your plot", png)]
+    value, figure = call_for_figure(Plotting(None, [returned, drawn, "junk"]), "plot")
+    assert value is None and figure is drawn
+    assert call_for_figure(Plotting("ax", []), "plot", label="x", feedback=Attach()) == ("ax", None)
+    assert len(images) == 1  # no picture, nothing attached
+    assert is_figure(drawn) and not is_figure({"axes": "none"}) and not is_figure(None)
+
+
 # ---------------------------------------------------------------------------
 # text
 # ---------------------------------------------------------------------------
@@ -252,6 +377,8 @@ def test_points_lists_and_sentences():
     assert sentence("the hull is wrong") == "The hull is wrong."
     assert sentence("convex_hull(points) returned 3.") == "convex_hull(points) returned 3."
     assert sentence("") == ""
+    assert sentences(["the hull is wrong", "", "plot_runge(3) returned None"]) == (
+        "The hull is wrong. plot_runge(3) returned None.")
 
 
 # ---------------------------------------------------------------------------

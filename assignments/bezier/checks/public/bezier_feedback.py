@@ -14,8 +14,9 @@ Two kinds of answer are judged here:
   point, then the shape of each piece along the curve.
 
 A judge returns when the answer is right, notes a broken convention in a
-:class:`Verdict` (which ends the check with partial credit once every case was
-looked at), and raises ``CheckFailure`` when the answer is wrong.
+:class:`~autograder.checks.Broken` record (which ends the check with partial
+credit once every case was looked at), and raises ``CheckFailure`` when the
+answer is wrong.
 
 The caller computes the expected values; the only curve evaluation done here
 is :func:`curve_points`, an independent oracle (``scipy.interpolate.BPoly``,
@@ -24,33 +25,35 @@ fine up to degree 40 or so) used to describe where a student's polygon goes.
 
 from __future__ import annotations
 
-import io
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.interpolate import BPoly
 
 from autograder.checks import (
+    Broken,
     CheckFailure,
+    Conventions,
     Credit,
     Student,
     describe,
     expect_array,
+    explain_errors,
+    render_png,
     show_number,
     show_point,
 )
-from autograder.errors import CallTimeout, StudentException
+from autograder.errors import CallTimeout
 
 #: Share of a check's points kept for each convention broken (multiplied together).
-FRACTIONS = {
+CONVENTIONS = Conventions({
     "levels": 0.5,       # de_casteljau returned the whole triangle; its last level is right
     "row": 0.5,          # the right point, as an array of shape (1, d) instead of (d,)
     "inexact-end": 0.5,  # the first/last control point up to rounding, not exactly
     "swapped": 0.5,      # split_bezier returned (right, left)
     "reversed": 0.5,     # a piece's control points listed from its end back to its start
-}
+})
 
 #: How to get the endpoints exactly, per function (shown when they are off by rounding).
 EXACT_HINTS = {
@@ -115,30 +118,23 @@ def size(ctrl: np.ndarray) -> float:
     return max(1.0, float(np.max(np.abs(ctrl))))
 
 
-def _sentence(text: str) -> str:
-    return text[:1].upper() + text[1:]
-
-
 # ---------------------------------------------------------------------------
 # calling the student
 # ---------------------------------------------------------------------------
 
 def ask(student: Student, fn: str, ctrl: np.ndarray, t: float, *, hint: str = "",
-        timeout: float | None = None) -> Any:
+        timeout: float | None = None) -> object:
     """``student.<fn>(ctrl, t)``; overflow, time-outs and deep recursion come back explained.
 
     Other exceptions of the student's code pass through (the plugin reports them
-    with the traceback).
+    with the traceback), and so do these when there is no ``hint``.
     """
+    known = ("OverflowError", "ZeroDivisionError", "RecursionError")
     try:
-        value, _ = student.call(fn, ctrl, float(t), timeout=timeout)
+        with explain_errors(call_text(fn, ctrl, t), dict.fromkeys(known, hint) if hint else {},
+                            traceback=True):
+            value, _ = student.call(fn, ctrl, float(t), timeout=timeout)
         return value
-    except StudentException as exc:
-        known = ("OverflowError", "ZeroDivisionError", "RecursionError")
-        if not hint or not any(k in str(exc) for k in known):
-            raise
-        trace = f"\n\n{exc.traceback}" if getattr(exc, "traceback", "") else ""
-        raise CheckFailure(f"{exc} ({call_text(fn, ctrl, t)}). {hint}{trace}") from None
     except CallTimeout:
         raise CheckFailure(
             f"{call_text(fn, ctrl, t)} did not return within the time limit (degree "
@@ -175,30 +171,10 @@ def timeout_hint(student: Student, fn: str, ctrl: np.ndarray, t: float) -> str:
 
 
 # ---------------------------------------------------------------------------
-# verdicts that collect broken conventions
-# ---------------------------------------------------------------------------
-
-@dataclass
-class Verdict:
-    """Conventions broken so far in one check: key -> the first message about it."""
-
-    issues: dict[str, str] = field(default_factory=dict)
-
-    def note(self, key: str, message: str) -> None:
-        self.issues.setdefault(key, message)
-
-    def finish(self, credit: Credit) -> None:
-        """Pass, or end the check with the product of the fractions and every message."""
-        if self.issues:
-            fraction = float(np.prod([FRACTIONS[k] for k in self.issues]))
-            credit.partial(fraction, " ".join(self.issues.values()))
-
-
-# ---------------------------------------------------------------------------
 # a point on the curve
 # ---------------------------------------------------------------------------
 
-def _levels_shape_ok(item: Any, rows: int, d: int, point_ok: bool) -> bool:
+def _levels_shape_ok(item: object, rows: int, d: int, point_ok: bool) -> bool:
     try:
         arr = np.asarray(item, dtype=float)
     except (TypeError, ValueError):
@@ -206,7 +182,7 @@ def _levels_shape_ok(item: Any, rows: int, d: int, point_ok: bool) -> bool:
     return arr.shape == (rows, d) or (point_ok and arr.shape == (d,))
 
 
-def _is_triangle(got: Any, n: int, d: int) -> bool:
+def _is_triangle(got: object, n: int, d: int) -> bool:
     """Whether ``got`` is the list of levels [(n+1, d), (n, d), ..., (1, d)].
 
     The last level may also be a bare point (d,), except at degree 0, where
@@ -220,8 +196,8 @@ def _is_triangle(got: Any, n: int, d: int) -> bool:
                for r, item in enumerate(got))
 
 
-def as_point(got: Any, *, fn: str, call: str, n: int, d: int,
-             verdict: Verdict) -> tuple[np.ndarray, str]:
+def as_point(got: object, *, fn: str, call: str, n: int, d: int,
+             broken: Broken) -> tuple[np.ndarray, str]:
     """The answer as a float point of shape (d,); notes a shape convention broken.
 
     Returns the point and a note to append to a value message ("" or where the
@@ -229,7 +205,7 @@ def as_point(got: Any, *, fn: str, call: str, n: int, d: int,
     """
     if _is_triangle(got, n, d):
         arrays = f"{n + 1} array{'s' if n else ''}"
-        verdict.note("levels", (
+        broken.note("levels", (
             f"{fn} should return the point on the curve, shape ({d},); you returned the whole "
             f"triangle of levels (a list of {arrays}). Return only the single point of the "
             "last level."))
@@ -244,7 +220,7 @@ def as_point(got: Any, *, fn: str, call: str, n: int, d: int,
     if arr.shape == (1, d):
         where = ("the single point of the last level, not the level itself"
                  if fn == "de_casteljau" else "for example row 0 of what you return now")
-        verdict.note("row", (
+        broken.note("row", (
             f"{fn} should return a point of shape ({d},), not (1, {d}): the values are right, "
             f"but drop the extra dimension ({where})."))
         arr = arr[0]
@@ -260,12 +236,12 @@ def as_point(got: Any, *, fn: str, call: str, n: int, d: int,
     return arr.astype(float), ""
 
 
-def judge_point(got: Any, expected: np.ndarray, *, fn: str, ctrl: np.ndarray, t: float,
-                atol: float, verdict: Verdict, hint: str = "") -> None:
+def judge_point(got: object, expected: np.ndarray, *, fn: str, ctrl: np.ndarray, t: float,
+                atol: float, broken: Broken, hint: str = "") -> None:
     """A point within ``atol`` (max-norm) of ``expected``; raise CheckFailure otherwise."""
     n, d = len(ctrl) - 1, ctrl.shape[1]
     call = call_text(fn, ctrl, t)
-    point, where = as_point(got, fn=fn, call=call, n=n, d=d, verdict=verdict)
+    point, where = as_point(got, fn=fn, call=call, n=n, d=d, broken=broken)
     if not np.all(np.isfinite(point)):
         raise CheckFailure(f"{call} returned {show_point(point)}{where}, which is not finite. "
                            f"{hint}".rstrip())
@@ -305,7 +281,7 @@ def reversed_note(point: np.ndarray, ctrl: np.ndarray, t: float, atol: float) ->
     return ""
 
 
-def weight_sum_note(got: Any, point: np.ndarray) -> str:
+def weight_sum_note(got: object, point: np.ndarray) -> str:
     """For a polygon of equal points: by what factor the answer scales the point, if it does."""
     try:
         arr = np.asarray(got, dtype=float).reshape(-1)
@@ -323,13 +299,13 @@ def weight_sum_note(got: Any, point: np.ndarray) -> str:
     return ""
 
 
-def judge_endpoint(got: Any, ctrl: np.ndarray, t: float, *, fn: str, atol: float,
-                   verdict: Verdict) -> None:
+def judge_endpoint(got: object, ctrl: np.ndarray, t: float, *, fn: str, atol: float,
+                   broken: Broken) -> None:
     """At t = 0 (t = 1) the answer must be ctrl[0] (ctrl[-1]) exactly."""
     n, d = len(ctrl) - 1, ctrl.shape[1]
     which, expected = ("first", ctrl[0]) if t == 0.0 else ("last", ctrl[-1])
     call = call_text(fn, ctrl, t)
-    point, where = as_point(got, fn=fn, call=call, n=n, d=d, verdict=verdict)
+    point, where = as_point(got, fn=fn, call=call, n=n, d=d, broken=broken)
     if np.array_equal(point, expected):
         return
     err = float(np.max(np.abs(point - expected)))
@@ -337,7 +313,7 @@ def judge_endpoint(got: Any, ctrl: np.ndarray, t: float, *, fn: str, atol: float
                f"with ctrl = {show_polygon(ctrl)} expected {show_point(expected)}, got "
                f"{show_point(point)}{where}")
     if err <= atol:
-        verdict.note("inexact-end", f"{message} (off by {err:.1e}: rounding). "
+        broken.note("inexact-end", f"{message} (off by {err:.1e}: rounding). "
                                     f"{EXACT_HINTS.get(fn, '')}".rstrip())
         return
     other = ctrl[-1] if t == 0.0 else ctrl[0]
@@ -351,51 +327,51 @@ def judge_endpoint(got: Any, ctrl: np.ndarray, t: float, *, fn: str, atol: float
 
 def grade_endpoints(student: Student, credit: Credit, fn: str, polygons: Iterable[np.ndarray], *,
                     rtol: float) -> None:
-    """Check ``fn`` at t = 0 and t = 1 on every polygon, then award the verdict."""
-    verdict = Verdict()
+    """Check ``fn`` at t = 0 and t = 1 on every polygon, then award the broken."""
+    broken = CONVENTIONS.record()
     for ctrl in polygons:
         for t in (0.0, 1.0):
             got = ask(student, fn, ctrl, t)
-            judge_endpoint(got, ctrl, t, fn=fn, atol=rtol * size(ctrl), verdict=verdict)
-    verdict.finish(credit)
+            judge_endpoint(got, ctrl, t, fn=fn, atol=rtol * size(ctrl), broken=broken)
+    broken.finish(credit)
 
 
 # ---------------------------------------------------------------------------
 # the two control polygons of a split
 # ---------------------------------------------------------------------------
 
-def curve_points(ctrl: np.ndarray, s: Any) -> np.ndarray:
+def curve_points(ctrl: ArrayLike, s: ArrayLike) -> np.ndarray:
     """Points of the Bezier curve of ``ctrl`` at ``s`` (scalar -> (d,), array -> (m, d))."""
     ctrl = np.asarray(ctrl, dtype=float)
     return BPoly(ctrl[:, None, :], [0.0, 1.0])(s)
 
 
-def as_polygons(got: Any, *, call: str, n: int, d: int) -> tuple[np.ndarray, np.ndarray]:
+def as_polygons(got: object, *, call: str, n: int, d: int) -> tuple[np.ndarray, np.ndarray]:
     """The answer as two float arrays of shape (n + 1, d), or a CheckFailure saying why not."""
     pair = isinstance(got, (list, tuple)) and len(got) == 2
     stacked = isinstance(got, np.ndarray) and got.ndim == 3 and got.shape[0] == 2
     if not (pair or stacked):
         raise CheckFailure(f"{call} should return two control polygons, a tuple (left, right); "
                            f"got {describe(got)}.")
-    out = []
+    out: list[np.ndarray] = []
     for side, item in zip(("left", "right"), got):
         name = f"the {side} polygon of {call}"
         arr = expect_array(item, dtype_kind="iuf", name=name)
         if arr.shape != (n + 1, d):
             extra = (f" Each piece is a Bezier curve of the same degree {n}, so it has "
                      f"{n + 1} control points with {d} coordinates each.")
-            raise CheckFailure(f"{_sentence(name)} should have shape ({n + 1}, {d}); got "
-                               f"shape {arr.shape}.{extra}")
+            raise CheckFailure(f"The {side} polygon of {call} should have shape ({n + 1}, {d}); "
+                               f"got shape {arr.shape}.{extra}")
         arr = arr.astype(float)
         if not np.all(np.isfinite(arr)):
-            raise CheckFailure(f"{_sentence(name)} holds values that are not finite.")
+            raise CheckFailure(f"The {side} polygon of {call} holds values that are not finite.")
         out.append(arr)
     return out[0], out[1]
 
 
 def judge_split(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: float,
                 expected: tuple[np.ndarray, np.ndarray], *, atol: float,
-                verdict: Verdict) -> None:
+                broken: Broken) -> None:
     """Right polygons pass; swapped or reversed ones are noted; anything else fails."""
     want_left, want_right = expected
 
@@ -409,14 +385,14 @@ def judge_split(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: float,
                 and (close(b, want_right) or close(b[::-1], want_right))):
             continue
         if swapped:
-            verdict.note("swapped", (
+            broken.note("swapped", (
                 f"{call} returned (right, left): return the piece from ctrl[0] to the cut "
                 "point first, then the piece from the cut point to ctrl[-1]."))
         backwards = [side for side, got, want in (("left", a, want_left),
                                                   ("right", b, want_right))
                      if not close(got, want)]
         if backwards:
-            verdict.note("reversed", _reversed_message(backwards, call))
+            broken.note("reversed", _reversed_message(backwards, call))
         return
     raise CheckFailure(split_failure(left, right, ctrl, t, expected, call=call, atol=atol))
 
@@ -433,7 +409,7 @@ def _reversed_message(sides: Sequence[str], call: str) -> str:
 def split_failure(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: float,
                   expected: tuple[np.ndarray, np.ndarray], *, call: str, atol: float) -> str:
     """The first thing wrong with two polygons of the right shape, in the order one checks."""
-    def off(a: Any, b: Any) -> bool:
+    def off(a: ArrayLike, b: ArrayLike) -> bool:
         return bool(np.max(np.abs(np.asarray(a) - np.asarray(b))) > atol)
 
     cut = expected[0][-1]
@@ -472,8 +448,6 @@ def split_failure(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: floa
 
 def split_picture(ctrl: np.ndarray, t: float, left: np.ndarray, right: np.ndarray) -> bytes:
     """PNG: the curve, its control polygon, and the student's two polygons (x-y plane)."""
-    import matplotlib
-    matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(5.5, 4.2))
@@ -493,24 +467,22 @@ def split_picture(ctrl: np.ndarray, t: float, left: np.ndarray, right: np.ndarra
     ax.set_aspect("equal", adjustable="datalim")
     ax.legend(fontsize=7, loc="best")
     ax.set_title("split_bezier: your two pieces")
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=90)
-    return buffer.getvalue()
+    return render_png(fig)
 
 
 def grade_split(student: Student, ctrl: np.ndarray, t: float,
-                expected: tuple[np.ndarray, np.ndarray], *, atol: float, verdict: Verdict,
+                expected: tuple[np.ndarray, np.ndarray], *, atol: float, broken: Broken,
                 picture: Callable[[str, bytes], None] | None = None) -> None:
     """Call ``split_bezier``, judge the answer, attach a picture when it is not right."""
     n, d = len(ctrl) - 1, ctrl.shape[1]
     got = ask(student, "split_bezier", ctrl, t)
     left, right = as_polygons(got, call=call_text("split_bezier", ctrl, t), n=n, d=d)
-    before = len(verdict.issues)
+    before = len(broken)
     try:
-        judge_split(left, right, ctrl, t, expected, atol=atol, verdict=verdict)
+        judge_split(left, right, ctrl, t, expected, atol=atol, broken=broken)
     except CheckFailure:
         if picture is not None and d >= 2:
             picture(f"split at t = {t:.4g}", split_picture(ctrl, t, left, right))
         raise
-    if picture is not None and d >= 2 and len(verdict.issues) > before:
+    if picture is not None and d >= 2 and len(broken) > before:
         picture(f"split at t = {t:.4g}", split_picture(ctrl, t, left, right))

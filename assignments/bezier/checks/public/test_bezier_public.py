@@ -11,12 +11,11 @@ worked examples of the notebook are also written out by hand below.
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-
 import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Feedback, Student
 
 #: Allowed error, relative to the polygon's size (max |coordinate|, at least 1). Every
 #: correct evaluation of these low-degree curves (Bernstein or de Casteljau, any order of
@@ -68,50 +67,50 @@ def _expected(name: str, ctrl: np.ndarray, t: float) -> np.ndarray:
     return point
 
 
-def _grade_points(student, credit, fn: str, name: str) -> None:
+def _grade_points(student: Student, credit: Credit, fn: str, name: str) -> None:
     raw, ts, hint = CURVES[name]
     ctrl = np.array(raw, dtype=float)
     atol = REL_TOL * fb.size(ctrl)
-    verdict = fb.Verdict()
+    broken = fb.CONVENTIONS.record()
     for t in ts:
         got = fb.ask(student, fn, ctrl, t)
         fb.judge_point(got, _expected(name, ctrl, t), fn=fn, ctrl=ctrl, t=t, atol=atol,
-                       verdict=verdict, hint=hint)
-    verdict.finish(credit)
+                       broken=broken, hint=hint)
+    broken.finish(credit)
 
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("name", list(CURVES))
-def test_eval_bezier(student, credit, name):
+def test_eval_bezier(student: Student, credit: Credit, name: str) -> None:
     _grade_points(student, credit, "eval_bezier", name)
 
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("name", list(CURVES))
-def test_de_casteljau(student, credit, name):
+def test_de_casteljau(student: Student, credit: Credit, name: str) -> None:
     _grade_points(student, credit, "de_casteljau", name)
 
 
-def _grade_endpoints(student, credit, fn: str) -> None:
+def _grade_endpoints(student: Student, credit: Credit, fn: str) -> None:
     polygons = [np.array(raw, dtype=float) for raw in ENDPOINT_POLYGONS]
     fb.grade_endpoints(student, credit, fn, polygons, rtol=REL_TOL)
 
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("name", ["lecture-and-tenths"])
-def test_eval_bezier_endpoints(student, credit, name):
+def test_eval_bezier_endpoints(student: Student, credit: Credit, name: str) -> None:
     _grade_endpoints(student, credit, "eval_bezier")
 
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("name", ["lecture-and-tenths"])
-def test_de_casteljau_endpoints(student, credit, name):
+def test_de_casteljau_endpoints(student: Student, credit: Credit, name: str) -> None:
     _grade_endpoints(student, credit, "de_casteljau")
 
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("name", list(SPLITS))
-def test_split_bezier(student, credit, feedback, name):
+def test_split_bezier(student: Student, credit: Credit, feedback: Feedback, name: str) -> None:
     raw, t, left, right = SPLITS[name]
     ctrl = np.array(raw, dtype=float)
     expected = (np.array(left, dtype=float), np.array(right, dtype=float))
@@ -120,7 +119,7 @@ def test_split_bezier(student, credit, feedback, name):
         if not np.allclose(fb.curve_points(poly, samples), fb.curve_points(ctrl, where),
                            rtol=0, atol=1e-13):
             raise RuntimeError(f"The hand-worked split {name} is wrong: fix the oracle.")
-    verdict = fb.Verdict()
-    fb.grade_split(student, ctrl, t, expected, atol=REL_TOL * fb.size(ctrl), verdict=verdict,
+    broken = fb.CONVENTIONS.record()
+    fb.grade_split(student, ctrl, t, expected, atol=REL_TOL * fb.size(ctrl), broken=broken,
                    picture=feedback.image)
-    verdict.finish(credit)
+    broken.finish(credit)

@@ -27,18 +27,28 @@ doi:10.1007/PL00009321
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pytest
 from scipy.spatial import Delaunay
 
-from autograder.compare import CheckFailure
+import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
+from autograder.checks import (
+    Broken,
+    CheckFailure,
+    Credit,
+    Dataset,
+    Feedback,
+    Student,
+    over_datasets,
+    sentence,
+    show_point,
+)
 from reference import delaunay, incircle, incircle_many, is_delaunay, orient2d_many
 
-
-import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
+Point = tuple[float, float]
+#: (a, b, c, d) with a, b, c counter-clockwise
+Quad = tuple[Point, Point, Point, Point]
 
 LAKE_CSV = Path(__file__).resolve().parents[2] / "data" / "lake.csv"
 #: a UTM-like origin (metres): large coordinates, small differences
@@ -61,7 +71,7 @@ def _integer_circle(r: int) -> list[tuple[int, int]]:
 CIRCLE_65 = _integer_circle(65)  # 36 points: exactly cocircular integers
 
 
-def _float_inside(a, b, c, d) -> bool:
+def _float_inside(a: Point, b: Point, c: Point, d: Point) -> bool:
     """The textbook determinant (translated to d) in floating point: what the checks fool."""
     (ax_, ay_), (bx_, by_), (cx_, cy_) = ((p[0] - d[0], p[1] - d[1]) for p in (a, b, c))
     det = ((ax_ * ax_ + ay_ * ay_) * (bx_ * cy_ - cx_ * by_)
@@ -70,14 +80,14 @@ def _float_inside(a, b, c, d) -> bool:
     return bool(det > 0)
 
 
-def _ccw(a, b, c) -> tuple:
+def _ccw(a: Point, b: Point, c: Point) -> tuple[Point, Point, Point]:
     return (a, b, c) if orient2d_many(a, b, c)[0] > 0 else (a, c, b)
 
 
-def _integer_cases(rng):
+def _integer_cases(rng: np.random.Generator) -> list[Quad]:
     """Small integer points: random quadruples, and quadruples on the circle of radius 5."""
     g = np.random.default_rng(501)
-    cases = []
+    cases: list[Quad] = []
     while len(cases) < 8:
         a, b, c, d = (tuple(int(v) for v in g.integers(-6, 7, 2)) for _ in range(4))
         if orient2d_many(a, b, c)[0] != 0 and d not in (a, b, c):
@@ -88,14 +98,15 @@ def _integer_cases(rng):
     return cases
 
 
-def _shift(p, scale=0.125, origin=(2.0**20 + 0.5, -(2.0**19) + 0.25)):
+def _shift(p: Point, scale: float = 0.125,
+           origin: Point = (2.0**20 + 0.5, -(2.0**19) + 0.25)) -> Point:
     return (origin[0] + scale * p[0], origin[1] + scale * p[1])
 
 
-def _cocircular_shifted(rng):
+def _cocircular_shifted(rng: np.random.Generator) -> list[Quad]:
     """Points exactly on one circle far from the origin (every coordinate exact in binary)."""
     g = np.random.default_rng(65)
-    cases = []
+    cases: list[Quad] = []
     for _ in range(6):
         i, j, k, m = g.choice(len(CIRCLE_65), 4, replace=False)
         a, b, c = (CIRCLE_65[v] for v in sorted((i, j, k)))  # sorted by angle: ccw
@@ -106,9 +117,10 @@ def _cocircular_shifted(rng):
     return cases
 
 
-def _nudged_circle_cases(g, count, fooled):
+def _nudged_circle_cases(g: np.random.Generator, count: int,
+                         fooled: Callable[[Point, Point, Point, Point], bool]) -> list[Quad]:
     """Points of CIRCLE_65 / 8, with d moved 1-3 ulps: the float sign is wrong for each."""
-    cases = []
+    cases: list[Quad] = []
     for _ in range(50000):
         idx = np.sort(g.choice(len(CIRCLE_65), 4, replace=False))
         k = int(g.integers(4))
@@ -126,18 +138,19 @@ def _nudged_circle_cases(g, count, fooled):
     return cases
 
 
-def _near_cocircular_ulp(rng):
+def _near_cocircular_ulp(rng: np.random.Generator) -> list[Quad]:
     u = 2.0**-53
-    unit = [((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0 + u)),       # one ulp inside
-            ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0 - 2 * u))]   # one ulp outside
+    unit: list[Quad] = [
+        ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0 + u)),       # one ulp inside
+        ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0 - 2 * u))]   # one ulp outside
     g = np.random.default_rng(4225)
     return unit + _nudged_circle_cases(
         g, 8, lambda a, b, c, d: _float_inside(a, b, c, d) != (incircle(a, b, c, d) > 0))
 
 
-def _unseen_near_cocircular(rng, count=8):
+def _unseen_near_cocircular(rng: np.random.Generator, count: int = 8) -> list[Quad]:
     """Random circles; d a few ulps from the circle through a, b, c; float sign wrong."""
-    cases = []
+    cases: list[Quad] = []
     for _ in range(40000):
         centre = rng.uniform(-10, 10, 2)
         radius = 10.0 ** rng.uniform(-1, 1.5)
@@ -161,29 +174,23 @@ def _unseen_near_cocircular(rng, count=8):
     return cases + [(a, b, c, middle), (a, b, c, far)]
 
 
-@dataclass(frozen=True)
-class CircleCases:
-    build: Callable[[np.random.Generator], list]
-    weight: int
-    hint: str = ""
-
-
-CIRCLE_CASES = {
-    "integer-cases": CircleCases(_integer_cases, 1),
-    "cocircular-shifted": CircleCases(
-        _cocircular_shifted, 1,
-        "These points are exactly on one circle, far from the origin: subtract d before "
-        "squaring, and compute exactly."),
-    "near-cocircular-ulp": CircleCases(_near_cocircular_ulp, 2, EXACT_HINT),
-    "unseen-near-cocircular": CircleCases(_unseen_near_cocircular, 2, EXACT_HINT),
+#: exact answers: no tolerance anywhere
+CIRCLE_CASES: dict[str, Dataset[list[Quad]]] = {
+    "integer-cases": Dataset(_integer_cases),
+    "cocircular-shifted": Dataset(
+        _cocircular_shifted,
+        hint="These points are exactly on one circle, far from the origin: subtract d before "
+             "squaring, and compute exactly."),
+    "near-cocircular-ulp": Dataset(_near_cocircular_ulp, points=2, hint=EXACT_HINT),
+    "unseen-near-cocircular": Dataset(_unseen_near_cocircular, points=2, hint=EXACT_HINT),
 }
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(c.weight))
-                                  for n, c in CIRCLE_CASES.items()])
-def test_in_circle(student, credit, rng, name):
+@over_datasets(CIRCLE_CASES)
+def test_in_circle(student: Student, credit: Credit, rng: np.random.Generator,
+                   name: str) -> None:
     dataset = CIRCLE_CASES[name]
-    cases = []
+    cases: list[tuple[Quad, object, int]] = []
     for a, b, c, d in dataset.build(rng):
         cases.append(((a, b, c, d), student.in_circle(a, b, c, d), incircle(a, b, c, d)))
     fb.judge_in_circle(cases, hint=dataset.hint, credit=credit)
@@ -193,26 +200,26 @@ def test_in_circle(student, credit, rng, name):
 # point sets
 # ---------------------------------------------------------------------------
 
-def _random_box(rng, n):
+def _random_box(rng: np.random.Generator, n: int) -> np.ndarray:
     """``n`` uniform points in a box of random place, size and shape."""
     width = rng.uniform(1.0, 50.0)
     size = np.array([width, width * rng.uniform(0.5, 2.0)])
     return rng.uniform(-100.0, 100.0, 2) + size * rng.uniform(size=(n, 2))
 
 
-def _grid_6x6(rng):
+def _grid_6x6(rng: np.random.Generator) -> np.ndarray:
     xy = np.array([(x, y) for x in range(6) for y in range(6)], dtype=float)
     return np.random.default_rng(66).permutation(xy) * 0.5 + [-1.0, 2.0]
 
 
-def _circle_20(rng):
+def _circle_20(rng: np.random.Generator) -> np.ndarray:
     """20 of the integer points of radius 65, scaled by 1/8 and moved: exactly cocircular."""
     g = np.random.default_rng(20)
     pts = np.array([CIRCLE_65[i] for i in g.choice(len(CIRCLE_65), 20, replace=False)], float)
     return pts / 8 + [4096.5, -1024.25]
 
 
-def _sliver(rng):
+def _sliver(rng: np.random.Generator) -> np.ndarray:
     """A lens 1 long and 2e-5 thick: thin triangles, and hull triangles whose
     circumcircles are hundreds of times wider than the points."""
     g = np.random.default_rng(5)
@@ -223,7 +230,7 @@ def _sliver(rng):
     return g.permutation(np.vstack([top, bottom, [[0.0, 0.0], [1.0, 0.0]]]))
 
 
-def _clustered(rng):
+def _clustered(rng: np.random.Generator) -> np.ndarray:
     """Gaussian clusters of very different sizes and spreads."""
     g = np.random.default_rng(31)
     parts = [g.uniform(-10, 10, 2) + 10.0 ** g.uniform(-3, 0) * g.standard_normal(
@@ -231,42 +238,39 @@ def _clustered(rng):
     return g.permutation(np.vstack(parts))
 
 
-def _lake_utm(rng):
+def _lake_utm(rng: np.random.Generator) -> np.ndarray:
     """data/lake.csv in UTM-like coordinates, in another order."""
     lake = np.loadtxt(LAKE_CSV, delimiter=",", skiprows=1)
     return np.random.default_rng(8).permutation(lake) + UTM_ORIGIN
 
 
-@dataclass(frozen=True)
-class PointSet:
-    build: Callable[[np.random.Generator], np.ndarray]
-    weight: int
-    general: bool = True  # no four points cocircular: unique answer, scipy must agree
-
-
-DATASETS = {
-    "random-50": PointSet(lambda rng: _random_box(rng, 50), 2),
-    "random-500": PointSet(lambda rng: _random_box(rng, 500), 2),
-    "random-2000": PointSet(lambda rng: _random_box(rng, 2000), 2),
-    "grid-6x6": PointSet(_grid_6x6, 2, general=False),
-    "circle-20": PointSet(_circle_20, 2, general=False),
-    "sliver": PointSet(_sliver, 2),
-    "clustered": PointSet(_clustered, 2),
-    "lake-utm": PointSet(_lake_utm, 1),
+#: exact predicates: no tolerance anywhere
+DATASETS: dict[str, Dataset[np.ndarray]] = {
+    "random-50": Dataset(lambda rng: _random_box(rng, 50), points=2),
+    "random-500": Dataset(lambda rng: _random_box(rng, 500), points=2),
+    "random-2000": Dataset(lambda rng: _random_box(rng, 2000), points=2),
+    "grid-6x6": Dataset(_grid_6x6, points=2),
+    "circle-20": Dataset(_circle_20, points=2),
+    "sliver": Dataset(_sliver, points=2),
+    "clustered": Dataset(_clustered, points=2),
+    "lake-utm": Dataset(_lake_utm),
 }
+#: many points cocircular: many valid answers, judged by their properties; elsewhere no
+#: four points are cocircular, the answer is unique and scipy must agree
+COCIRCULAR = {"grid-6x6", "circle-20"}
 
 
 # ---------------------------------------------------------------------------
 # the exact judge
 # ---------------------------------------------------------------------------
 
-def _sorted_set(tri) -> set[tuple[int, ...]]:
+def _sorted_set(tri: np.ndarray) -> set[tuple[int, ...]]:
     return {tuple(t) for t in np.sort(np.asarray(tri), axis=1).tolist()}
 
 
-def _interior_pairs(tri: np.ndarray):
+def _interior_pairs(tri: np.ndarray) -> np.ndarray:
     """For each interior edge u -> v of triangle k (apex w), the apex z across it."""
-    edge_of = {}
+    edge_of: dict[tuple[int, int], tuple[int, int]] = {}
     for k, t in enumerate(tri.tolist()):
         for i in range(3):
             edge_of[t[i], t[(i + 1) % 3]] = (k, t[(i + 2) % 3])
@@ -297,7 +301,7 @@ def _missing_near_hull(fixed: np.ndarray, expected: np.ndarray) -> bool | None:
     if not missing or not got <= want:
         return None
     hull = {frozenset(e) for e in fb.boundary_edges(expected)}
-    by_edge: dict[frozenset, list[tuple[int, ...]]] = {}
+    by_edge: dict[frozenset[int], list[tuple[int, ...]]] = {}
     for t in missing:
         for i in range(3):
             by_edge.setdefault(frozenset((t[i], t[(i + 1) % 3])), []).append(t)
@@ -314,12 +318,12 @@ def _missing_near_hull(fixed: np.ndarray, expected: np.ndarray) -> bool | None:
     return reached == missing
 
 
-def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool):
+def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool) -> fb.Judge:
     """A judge (see the feedback module) using exact predicates only."""
     n = len(points)
     hull = len(fb.boundary_edges(expected))
 
-    def judge(tri: np.ndarray) -> tuple[float, list[str]]:
+    def judge(tri: np.ndarray, broken: Broken) -> None:
         fb.check_indices(tri, n)
         p = points
         turn = orient2d_many(p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]])
@@ -339,8 +343,7 @@ def exact_judge(points: np.ndarray, expected: np.ndarray, *, general: bool):
             raise CheckFailure("Your triangles do not form the Delaunay triangulation of the "
                                "points (they overlap or leave gaps).")
         if clockwise.size:
-            return fb.FRACTIONS["clockwise"], [fb.clockwise_note(tri, clockwise.tolist())]
-        return 1.0, []
+            broken.note("clockwise", fb.clockwise_note(tri, clockwise.tolist()))
 
     return judge
 
@@ -357,7 +360,8 @@ def _check_overlaps(tri: np.ndarray, fixed: np.ndarray) -> None:
                     f"overlap: both lie on the same side of their common edge ({e[0]}, {e[1]}).")
 
 
-def _check_coverage(points, tri, fixed, expected, hull) -> None:
+def _check_coverage(points: np.ndarray, tri: np.ndarray, fixed: np.ndarray,
+                    expected: np.ndarray, hull: int) -> None:
     """Fail unless the triangles use every point and fill the convex hull."""
     n, m, count = len(points), len(tri), len(expected)
     unused = sorted(set(range(n)) - set(fixed.ravel().tolist()))
@@ -373,7 +377,7 @@ def _check_coverage(points, tri, fixed, expected, hull) -> None:
     inside = _vertex_inside(points, fixed) if m > count else None
     if inside is not None:
         q, k = inside
-        raise CheckFailure(fb.sentence(
+        raise CheckFailure(sentence(
             f"{parts[0]}: point {q} lies strictly inside triangle {k} "
             f"{fb.show_triangle(tri[k])}, so some triangles overlap"))
     near_hull = _missing_near_hull(fixed, expected)
@@ -386,25 +390,26 @@ def _check_coverage(points, tri, fixed, expected, hull) -> None:
         u, v, q = beyond
         if near_hull:
             parts.append(f"the triangles along the hull are missing ({fb.SUPER_HINT}); "
-                         f"point {q} at {fb.show_point(points[q])} lies outside your mesh, "
+                         f"point {q} at {show_point(points[q])} lies outside your mesh, "
                          f"beyond its edge ({u}, {v})")
         else:
-            parts.append(f"point {q} at {fb.show_point(points[q])} lies beyond the edge "
+            parts.append(f"point {q} at {show_point(points[q])} lies beyond the edge "
                          f"({u}, {v}), which has a triangle on one side only: the mesh "
                          "does not fill the convex hull")
     elif near_hull:
         parts.append(f"the triangles along the hull are missing ({fb.SUPER_HINT})")
     if unused:
         q = unused[0]
-        parts.append(f"point {q} at {fb.show_point(points[q])} is a corner of no triangle"
+        parts.append(f"point {q} at {show_point(points[q])} is a corner of no triangle"
                      + (f" ({len(unused)} points are unused)" if len(unused) > 1 else ""))
     if m > count and near_hull is None and beyond is None and not unused:
         parts.append("some triangles overlap")
     text = parts[0] + (": " + "; ".join(parts[1:]) if len(parts) > 1 else "")
-    raise CheckFailure(fb.sentence(text))
+    raise CheckFailure(sentence(text))
 
 
-def _vertex_inside(points: np.ndarray, fixed: np.ndarray, limit: int = 5000):
+def _vertex_inside(points: np.ndarray, fixed: np.ndarray,
+                   limit: int = 5000) -> tuple[int, int] | None:
     """``(q, k)``: a point strictly inside counter-clockwise triangle ``k`` (exact), or None."""
     corners = points[fixed]
     low, high = corners.min(axis=1), corners.max(axis=1)
@@ -421,7 +426,7 @@ def _vertex_inside(points: np.ndarray, fixed: np.ndarray, limit: int = 5000):
     return None
 
 
-def _check_empty_circles(points, tri, fixed) -> None:
+def _check_empty_circles(points: np.ndarray, tri: np.ndarray, fixed: np.ndarray) -> None:
     """Fail at the first interior edge that is not locally Delaunay (exact)."""
     pairs = _interior_pairs(fixed)
     if len(pairs) == 0:
@@ -436,14 +441,14 @@ def _check_empty_circles(points, tri, fixed) -> None:
             f"({u}, {v}): the triangles on either side of it should be replaced).")
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(d.weight))
-                                  for n, d in DATASETS.items()])
-def test_delaunay(student, credit, rng, name):
-    dataset = DATASETS[name]
-    points = dataset.build(rng)
-    expected = oracle(points, general=dataset.general)
+@over_datasets(DATASETS)
+def test_delaunay(student: Student, credit: Credit, rng: np.random.Generator,
+                  name: str) -> None:
+    points = DATASETS[name].build(rng)
+    general = name not in COCIRCULAR
+    expected = oracle(points, general=general)
     got = student.delaunay(points)
-    judge = exact_judge(points, expected, general=dataset.general)
+    judge = exact_judge(points, expected, general=general)
     fb.grade_triangulation(got, len(points), judge, credit)
 
 
@@ -451,7 +456,7 @@ def test_delaunay(student, credit, rng, name):
 # plotting on the mesh
 # ---------------------------------------------------------------------------
 
-def _unseen_field(rng):
+def _unseen_field(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Random points in a random box, and a smooth function with a random range."""
     points = _random_box(rng, int(rng.integers(80, 200)))
     z = (points - points.min(axis=0)) / np.ptp(points, axis=0)
@@ -460,18 +465,22 @@ def _unseen_field(rng):
     return points, rng.uniform(-50, 50) + rng.uniform(1, 100) * wave
 
 
-def _far_values(rng):
+def _far_values(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """The lake with values in a narrow band far from 0 (a colour scale fixed to [0, 1] fails)."""
     points = np.loadtxt(LAKE_CSV, delimiter=",", skiprows=1)
     x, y = points[:, 0], points[:, 1]
     return points, 1013.0 + 0.02 * np.hypot(x - 400.0, y - 320.0) / 300.0
 
 
-FIELDS = {"unseen-random": (_unseen_field, 2), "far-values": (_far_values, 1)}
+#: (points, values u at the points); the colour range tolerance is COLOUR_RANGE_TOL
+FIELDS: dict[str, Dataset[tuple[np.ndarray, np.ndarray]]] = {
+    "unseen-random": Dataset(_unseen_field, points=2),
+    "far-values": Dataset(_far_values),
+}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(w))
-                                  for n, (_, w) in FIELDS.items()])
-def test_plot_on_mesh(student, credit, feedback, rng, name):
-    points, u = FIELDS[name][0](rng)
+@over_datasets(FIELDS)
+def test_plot_on_mesh(student: Student, credit: Credit, feedback: Feedback,
+                      rng: np.random.Generator, name: str) -> None:
+    points, u = FIELDS[name].build(rng)
     fb.grade_figure(student, points, delaunay(points), u, credit, feedback)

@@ -1,9 +1,10 @@
 """Staged feedback on in-circle, triangulation and mesh-plot answers (public and hidden checks).
 
 A triangulation check reads the answer with :func:`as_triangles` (type and
-shape), then hands the index array to a *judge*: a function that returns
-``(fraction, notes)`` when the triangles are right up to conventions
-(clockwise triangles), or raises ``CheckFailure`` saying what is wrong.
+shape), then hands the index array to a *judge*: a function that returns when
+the triangles are right, noting the conventions they break (clockwise
+triangles) in a :class:`~autograder.checks.Broken` record, or raises
+``CheckFailure`` saying what is wrong.
 :func:`grade_triangulation` runs the judge and, when it fails, tries the same
 answer shifted down by one: a triangulation that is right with 1-based
 indices earns part of the points.
@@ -20,42 +21,43 @@ orientation.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import numpy as np
 from matplotlib.path import Path
+from numpy.typing import ArrayLike
 
 from autograder.checks import (
+    Broken,
     CheckFailure,
+    Conventions,
     Credit,
     Feedback,
+    FigureData,
+    Student,
+    call_for_figure,
     describe,
     expect_array,
-    figure_png,
+    is_figure,
     sentence,
     show_point,
 )
 
-#: fraction of a check's points kept for each convention broken (multiplied together)
-FRACTIONS = {
+#: what a right answer keeps of the points for each convention it breaks (multiplied together)
+CONVENTIONS = Conventions({
     "clockwise": 0.5,   # right triangles, some listed clockwise
     "one-based": 0.5,   # right triangles, indices counted from 1
     "not-bool": 0.5,    # right answers as 1/0 instead of True/False
     "no-return": 0.5,   # right plot, but the figure was not returned
-}
+})
 
 NAME = "delaunay(points)"
 SUPER_HINT = "a super-triangle that is too small?"
 
-Judge = Callable[[np.ndarray], tuple[float, list[str]]]
+#: judge(triangles, broken): returns when right (noting broken conventions), else CheckFailure
+Judge = Callable[[np.ndarray, Broken], None]
 
-
-# ---------------------------------------------------------------------------
-# writing numbers, points and triangles
-# ---------------------------------------------------------------------------
-
-def show_triangle(t: Sequence[int]) -> str:
-    return "(" + ", ".join(str(int(v)) for v in t) + ")"
+#: a triangle's three indices, written like a point: (4, 0, 7)
+show_triangle = show_point
 
 
 def count_message(expected: int, n: int, hull: int, got: int) -> str:
@@ -68,9 +70,9 @@ def count_message(expected: int, n: int, hull: int, got: int) -> str:
 # reading a triangulation
 # ---------------------------------------------------------------------------
 
-def as_triangles(got: Any) -> np.ndarray:
+def as_triangles(got: object) -> np.ndarray:
     """The answer as an ``(m, 3)`` int64 array with ``m >= 1``, or CheckFailure."""
-    hint = (" Return an (m, 3) array of integer indices into `points`, one row per "
+    hint = ("Return an (m, 3) array of integer indices into `points`, one row per "
             "triangle, e.g. np.array(triangles, dtype=int).")
     if isinstance(got, (list, tuple, np.ndarray)) and np.size(got) == 0:
         raise CheckFailure(
@@ -79,12 +81,7 @@ def as_triangles(got: Any) -> np.ndarray:
             "triangles (2n - 2 - h of them). Check that your loop keeps the triangles it "
             "builds: for example, that removing the triangles that touch the super-triangle "
             "does not remove them all.")
-    try:
-        arr = expect_array(got, dtype_kind="iu", name=NAME)
-    except CheckFailure as exc:
-        raise CheckFailure(f"{exc}{hint}") from None
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise CheckFailure(f"{NAME} should have shape (m, 3); got shape {arr.shape}.{hint}")
+    arr = expect_array(got, shape=(None, 3), dtype_kind="iu", name=NAME, hint=hint)
     return arr.astype(np.int64)
 
 
@@ -129,29 +126,28 @@ def clockwise_note(tri: np.ndarray, clockwise: Sequence[int]) -> str:
             "of every triangle counter-clockwise")
 
 
-def grade_triangulation(got: Any, n: int, judge: Judge, credit: Credit) -> None:
+def grade_triangulation(got: object, n: int, judge: Judge, credit: Credit) -> None:
     """Judge the answer and end the check: pass, ``credit.partial(...)``, or CheckFailure."""
     tri = as_triangles(got)
+    broken = CONVENTIONS.record()
     try:
-        fraction, notes = judge(tri)
+        judge(tri, broken)
     except CheckFailure as first:
         if tri.min() < 1 or tri.max() > n:
             raise
+        broken = CONVENTIONS.record()
+        broken.note("one-based", f"indices must start at 0: your triangles are right with "
+                                 f"every index counted from 1 (you use 1 to {int(tri.max())} "
+                                 f"for {n} points), so subtract 1")
         try:
-            fraction, notes = judge(tri - 1)
+            judge(tri - 1, broken)
         except CheckFailure as second:
             if tri.max() < n:
                 raise first from None
             raise CheckFailure(f"Indices must start at 0 (you use 1 to {n} for {n} points). "
                                f"Even counted from 1 your triangles are not right: {second}"
                                ) from None
-        fraction *= FRACTIONS["one-based"]
-        shifted = (f"indices must start at 0: your triangles are right with every index "
-                   f"counted from 1 (you use 1 to {int(tri.max())} for {n} points), so "
-                   "subtract 1")
-        notes = [shifted, *notes]
-    if notes:
-        credit.partial(fraction, sentence("; ".join(notes)))
+    broken.finish(credit)
 
 
 # ---------------------------------------------------------------------------
@@ -182,13 +178,13 @@ def _float_inside(points: np.ndarray, t: Sequence[int]) -> int | None:
     return inside[0] if inside else None
 
 
-def known_answer_judge(points: Any, answers: Sequence[Any]) -> Judge:
+def known_answer_judge(points: ArrayLike, answers: Sequence[ArrayLike]) -> Judge:
     """A judge that accepts exactly the triangulations in ``answers`` (ccw index triples)."""
     pts = np.asarray(points, dtype=float)
     n = len(pts)
     options = [np.asarray(a, dtype=np.int64).reshape(-1, 3) for a in answers]
 
-    def judge(tri: np.ndarray) -> tuple[float, list[str]]:
+    def judge(tri: np.ndarray, broken: Broken) -> None:
         check_indices(tri, n)
         got = [tuple(sorted(t)) for t in tri.tolist()]
         best = max(options, key=lambda a: len(set(got) & {tuple(sorted(t))
@@ -201,8 +197,7 @@ def known_answer_judge(points: Any, answers: Sequence[Any]) -> Judge:
         clockwise = [k for k, t in enumerate(tri.tolist())
                      if not _same_rotation(t, ccw[tuple(sorted(t))])]
         if clockwise:
-            return FRACTIONS["clockwise"], [clockwise_note(tri, clockwise)]
-        return 1.0, []
+            broken.note("clockwise", clockwise_note(tri, clockwise))
 
     return judge
 
@@ -241,7 +236,7 @@ def _difference(pts: np.ndarray, tri: np.ndarray, best: np.ndarray,
 # in_circle answers
 # ---------------------------------------------------------------------------
 
-def in_circle_call(a: Any, b: Any, c: Any, d: Any) -> str:
+def in_circle_call(a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike) -> str:
     return f"in_circle({show_point(a)}, {show_point(b)}, {show_point(c)}, {show_point(d)})"
 
 
@@ -250,14 +245,15 @@ SIGN_HINT = ("Check the sign convention: for counter-clockwise a, b, c the in-ci
              "determinant is positive exactly when d is inside the circle.")
 
 
-def judge_in_circle(cases: Sequence[tuple[tuple[Any, ...], Any, int]], *, hint: str = "",
-                    credit: Credit) -> None:
+def judge_in_circle(cases: Sequence[tuple[tuple[ArrayLike, ...], object, int]], *,
+                    hint: str = "", credit: Credit) -> None:
     """Judge ``(args, got, where)`` triples; ``where`` is +1 inside, 0 on, -1 outside.
 
     Ends the check: pass, partial credit (answers right but not ``bool``), or
     CheckFailure with the first wrong case.
     """
-    wrong, not_bool = [], []
+    wrong: list[tuple[str, bool, int]] = []
+    not_bool: list[tuple[str, object]] = []
     for args, got, where in cases:
         call = in_circle_call(*args)
         if isinstance(got, bool):
@@ -286,9 +282,10 @@ def judge_in_circle(cases: Sequence[tuple[tuple[Any, ...], Any, int]], *, hint: 
         raise CheckFailure(message)
     if not_bool:
         call, got = not_bool[0]
-        credit.partial(FRACTIONS["not-bool"],
-                       f"{call} returned {got!r} ({type(got).__name__}); the answers are right, "
-                       "but return True or False (a bool), for example `return det > 0`.")
+        CONVENTIONS.partial(credit, "not-bool",
+                            f"{call} returned {got!r} ({type(got).__name__}); the answers are "
+                            "right, but return True or False (a bool), for example "
+                            "`return det > 0`.")
 
 
 # ---------------------------------------------------------------------------
@@ -304,7 +301,7 @@ COVERAGE = 0.95
 MAX_SAMPLES = 400
 
 
-def _covered(segments: Sequence[Any], samples: np.ndarray) -> np.ndarray:
+def _covered(segments: Sequence[ArrayLike], samples: np.ndarray) -> np.ndarray:
     """Even-odd rule over every closed sub-path: True where a sample is inside the region."""
     inside = np.zeros(len(samples), dtype=bool)
     for seg in segments:
@@ -314,19 +311,20 @@ def _covered(segments: Sequence[Any], samples: np.ndarray) -> np.ndarray:
     return inside
 
 
-def judge_figure(figure: Any, points: Any, triangles: Any, u: Any) -> None:
+def judge_figure(figure: object, points: ArrayLike, triangles: ArrayLike, u: ArrayLike) -> None:
     """Fail unless some collection fills the mesh and is coloured over the range of ``u``."""
     pts = np.asarray(points, dtype=float)
     tri = np.asarray(triangles, dtype=np.int64)
     u = np.asarray(u, dtype=float)
-    if not isinstance(figure, dict) or "axes" not in figure:
+    if not is_figure(figure):
         raise CheckFailure("plot_on_mesh(points, triangles, u) should return the matplotlib "
                            f"Figure it drew on (e.g. `return fig`); got {describe(figure)}.")
     step = max(1, len(tri) // MAX_SAMPLES)
     samples = pts[tri[::step]].mean(axis=1)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     slack = 0.01 * float(np.max(hi - lo))
-    best_share, coloured, misplaced = 0.0, [], 0
+    best_share, misplaced = 0.0, 0
+    coloured: list[FigureData] = []
     for ax in figure["axes"]:
         for coll in ax.get("collections", []):
             segments = [s for s in coll.get("segments", []) if len(s)]
@@ -360,7 +358,7 @@ def judge_figure(figure: Any, points: Any, triangles: Any, u: Any) -> None:
     _check_colours(coloured, u)
 
 
-def _check_colours(coloured: list[dict], u: np.ndarray) -> None:
+def _check_colours(coloured: list[FigureData], u: np.ndarray) -> None:
     umin, umax = float(u.min()), float(u.max())
     tol = COLOUR_RANGE_TOL * (umax - umin) + 1e-12 * max(abs(umin), abs(umax), 1.0)
     ranges = []
@@ -385,19 +383,14 @@ def _check_colours(coloured: list[dict], u: np.ndarray) -> None:
                        "themselves, one value per point.")
 
 
-def grade_figure(student: Any, points: Any, triangles: Any, u: Any, credit: Credit,
-                 feedback: Feedback) -> None:
+def grade_figure(student: Student, points: np.ndarray, triangles: np.ndarray, u: np.ndarray,
+                 credit: Credit, feedback: Feedback) -> None:
     """Call ``plot_on_mesh``, attach its picture, and judge it (figure returned or left open)."""
-    value, opened = student.call("plot_on_mesh", points, triangles, u, figures=True)
-    figure = value if isinstance(value, dict) and "axes" in value else None
-    if figure is None and opened:
-        figure = opened[-1]
-    png = figure_png(figure)
-    if png:
-        feedback.image("your plot_on_mesh", png)
+    value, figure = call_for_figure(student, "plot_on_mesh", points, triangles, u,
+                                    feedback=feedback, label="your plot_on_mesh")
     if value is None and figure is not None:
         judge_figure(figure, points, triangles, u)
-        credit.partial(FRACTIONS["no-return"],
-                       "Your plot is right, but plot_on_mesh returned None: end it with "
-                       "`return fig` so that the figure can be used (and graded).")
+        CONVENTIONS.partial(credit, "no-return",
+                            "Your plot is right, but plot_on_mesh returned None: end it with "
+                            "`return fig` so that the figure can be used (and graded).")
     judge_figure(value, points, triangles, u)

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-
 import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Feedback, Student
 
 HERE = Path(__file__).resolve().parent
 LAKE_CSV = HERE.parents[1] / "data" / "lake.csv"
@@ -71,7 +71,7 @@ def lake_depth(points: np.ndarray) -> np.ndarray:
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("case", list(CIRCLES))
-def test_in_circle_small(student, credit, case):
+def test_in_circle_small(student: Student, credit: Credit, case: str) -> None:
     cases = []
     for a, b, c, d, where in CIRCLES[case]:
         cases.append(((a, b, c, d), student.in_circle(a, b, c, d), where))
@@ -80,7 +80,7 @@ def test_in_circle_small(student, credit, case):
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("case", list(SMALL))
-def test_delaunay_small(student, credit, case):
+def test_delaunay_small(student: Student, credit: Credit, case: str) -> None:
     raw, answers = SMALL[case]
     points = np.array(raw, dtype=float)
     got = student.delaunay(points)
@@ -89,7 +89,7 @@ def test_delaunay_small(student, credit, case):
 
 
 @pytest.mark.points(2)
-def test_delaunay_lake(student, credit):
+def test_delaunay_lake(student: Student, credit: Credit) -> None:
     points = lake_points()
     got = student.delaunay(points)
     fb.grade_triangulation(got, len(points),
@@ -97,6 +97,6 @@ def test_delaunay_lake(student, credit):
 
 
 @pytest.mark.points(2)
-def test_plot_on_mesh_lake(student, credit, feedback):
+def test_plot_on_mesh_lake(student: Student, credit: Credit, feedback: Feedback) -> None:
     points = lake_points()
     fb.grade_figure(student, points, lake_triangles(), lake_depth(points), credit, feedback)

@@ -20,18 +20,16 @@ robustness problems in geometric computations", Computational Geometry 40(1),
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from autograder.compare import same_cycle
+import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Dataset, Student, over_datasets, same_cycle
 from reference import convex_hull as reference_hull, orient2d
 
-
-import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
+Point = tuple[float, float]
+Triple = tuple[Point, Point, Point]
 
 U = 2.0**-53  # the gap between neighbouring doubles in [0.5, 1)
 NEAR_COLLINEAR_HINT = ("These points are nearly collinear: a floating-point determinant can "
@@ -45,7 +43,7 @@ NEAR_COLLINEAR_HINT = ("These points are nearly collinear: a floating-point dete
 #: diagonal. Found by a search in which the float determinant (pivot p) has the
 #: wrong sign; most also fool the pivots q and r, the expanded 3 x 3 formula and
 #: numpy.linalg.det. Decimal literals round-trip exactly.
-KETTNER_TRIPLES = [
+KETTNER_TRIPLES: list[Triple] = [
     ((0.5000000000000204, 0.5000000000000064), (12.000000000000005, 11.999999999999998),
      (24.00000000000001, 24.00000000000001)),
     ((0.50000000000001, 0.500000000000024), (12.000000000000005, 12.000000000000005),
@@ -70,13 +68,13 @@ KETTNER_TRIPLES = [
 ]
 
 
-def _integer_turns(rng):
+def _integer_turns(rng: np.random.Generator) -> list[Triple]:
     return [((0, 0), (4, 0), (4, 3)), ((4, 3), (4, 0), (0, 0)), ((0, 0), (2, 2), (5, 5)),
             ((-3, 7), (2, -1), (-8, 15)), ((10, -4), (10, 9), (10, 2)),
             ((6, 6), (6, 6), (1, 2)), ((1, 2), (3, 1), (2, 4)), ((1, 2), (2, 4), (3, 1))]
 
 
-def _float_collinear(rng):
+def _float_collinear(rng: np.random.Generator) -> list[Triple]:
     xs = [0.1, 0.3, 0.7, 1.9, 2.65]
     on_y_eq_x = [(x, x) for x in xs]
     on_y_eq_2x = [(x, 2 * x) for x in xs]          # doubling a double is exact
@@ -86,23 +84,23 @@ def _float_collinear(rng):
         ((0.1, 0.1), (0.3, 0.30000000000000004), (0.7, 0.7))]
 
 
-def _kettner_ulp(rng):
+def _kettner_ulp(rng: np.random.Generator) -> list[Triple]:
     return KETTNER_TRIPLES
 
 
-def _scaled_triangles(rng):
+def _scaled_triangles(rng: np.random.Generator) -> list[Triple]:
     """Well-shaped triangles, shrunk or blown up: no tolerance can fit every scale."""
     base = [((0.0, 0.0), (3.0, 1.0), (1.0, 2.0)), ((0.0, 0.0), (1.0, 2.0), (3.0, 1.0)),
             ((1.0, 1.0), (2.0, 2.0), (4.0, 4.0))]
-    out = []
+    out: list[Triple] = []
     for scale in (1e-9, 1e-170, 1e170):
         out += [tuple((x * scale, y * scale) for x, y in tri) for tri in base]
     return out
 
 
-def _unseen_near_collinear(rng, count=10):
+def _unseen_near_collinear(rng: np.random.Generator, count: int = 10) -> list[Triple]:
     """Random lines anywhere in [-1000, 1000]^2, p a few ulps off: float signs go wrong."""
-    found = []
+    found: list[Triple] = []
     for _ in range(20000):
         a, b = rng.uniform(-1000, 1000, 2), rng.uniform(-1000, 1000, 2)
         t = rng.uniform(1.5, 3.0)
@@ -117,30 +115,25 @@ def _unseen_near_collinear(rng, count=10):
     return found
 
 
-def _float_sign(p, q, r):
+def _float_sign(p: Point, q: Point, r: Point) -> int:
     """The sign of the determinant in plain floats, pivot p: what a naive answer says."""
     dqx, dqy, drx, dry = q[0] - p[0], q[1] - p[1], r[0] - p[0], r[1] - p[1]
     det = dqx * dry - dqy * drx
-    return (det > 0) - (det < 0)
+    return int(np.sign(det))
 
 
-@dataclass(frozen=True)
-class Triples:
-    build: Callable[[np.random.Generator], list]
-    weight: int
-    hint: str = ""
-
-
-TRIPLES = {
-    "integer-turns": Triples(_integer_turns, 1),
-    "float-collinear": Triples(_float_collinear, 1,
-                               "Compare the exact determinant with 0: a tolerance calls "
-                               "points that turn by a hair collinear."),
-    "kettner-ulp": Triples(_kettner_ulp, 2, NEAR_COLLINEAR_HINT),
-    "scaled-triangles": Triples(_scaled_triangles, 1,
-                                "Tiny or huge coordinates: compare the exact determinant with "
-                                "0, not with a tolerance, and avoid float overflow/underflow."),
-    "unseen-near-collinear": Triples(_unseen_near_collinear, 2, NEAR_COLLINEAR_HINT),
+#: exact signs: no tolerance anywhere
+TRIPLES: dict[str, Dataset[list[Triple]]] = {
+    "integer-turns": Dataset(_integer_turns),
+    "float-collinear": Dataset(_float_collinear,
+                               hint="Compare the exact determinant with 0: a tolerance calls "
+                                    "points that turn by a hair collinear."),
+    "kettner-ulp": Dataset(_kettner_ulp, points=2, hint=NEAR_COLLINEAR_HINT),
+    "scaled-triangles": Dataset(_scaled_triangles,
+                                hint="Tiny or huge coordinates: compare the exact determinant "
+                                     "with 0, not with a tolerance, and avoid float "
+                                     "overflow/underflow."),
+    "unseen-near-collinear": Dataset(_unseen_near_collinear, points=2, hint=NEAR_COLLINEAR_HINT),
 }
 
 #: (permutation of (p, q, r), sign factor): cycling keeps the turn, swapping flips it
@@ -148,9 +141,8 @@ PERMUTATIONS = [((0, 1, 2), 1), ((1, 2, 0), 1), ((2, 0, 1), 1),
                 ((1, 0, 2), -1), ((0, 2, 1), -1), ((2, 1, 0), -1)]
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(t.weight))
-                                  for n, t in TRIPLES.items()])
-def test_orientation(student, rng, name):
+@over_datasets(TRIPLES)
+def test_orientation(student: Student, rng: np.random.Generator, name: str) -> None:
     dataset = TRIPLES[name]
     for p, q, r in dataset.build(rng):
         got = student.orientation(p, q, r)
@@ -158,7 +150,7 @@ def test_orientation(student, rng, name):
 
 
 @pytest.mark.points(1)
-def test_orientation_symmetry(student, rng):
+def test_orientation_symmetry(student: Student, rng: np.random.Generator) -> None:
     for triple in _unseen_near_collinear(rng, count=3):
         sign = orient2d(*triple)
         for order, factor in PERMUTATIONS:
@@ -174,11 +166,11 @@ def test_orientation_symmetry(student, rng):
 # convex hull point sets
 # ---------------------------------------------------------------------------
 
-def _random_300(rng):
+def _random_300(rng: np.random.Generator) -> np.ndarray:
     return np.random.default_rng(300).uniform(-2.0, 3.0, size=(300, 2))
 
 
-def _kettner_near_collinear(rng):
+def _kettner_near_collinear(rng: np.random.Generator) -> np.ndarray:
     """Pins a few ulps around the diagonal from (0.5, 0.5) to (24, 24), plus three pins
     above it: the lower-right side of the band runs along the nearly collinear pins.
     With seed 22 float-based marches (any pivot) miss corners."""
@@ -191,12 +183,12 @@ def _kettner_near_collinear(rng):
     return np.array(cluster + mid + mid2 + end + above)
 
 
-def _grid_5x5(rng):
+def _grid_5x5(rng: np.random.Generator) -> np.ndarray:
     xy = np.array([(x, y) for x in range(5) for y in range(5)], dtype=float)
     return np.random.default_rng(55).permutation(xy) * 0.5 + [-1.0, 2.0]
 
 
-def _duplicates(rng):
+def _duplicates(rng: np.random.Generator) -> np.ndarray:
     """A hexagon and interior pins, a third of them repeated; the smallest pin comes 3 times."""
     g = np.random.default_rng(7)
     angles = np.arange(6) * np.pi / 3
@@ -208,34 +200,34 @@ def _duplicates(rng):
     return g.permutation(np.vstack([base, repeats, smallest, smallest]))
 
 
-def _all_collinear(rng):
+def _all_collinear(rng: np.random.Generator) -> np.ndarray:
     t = np.random.default_rng(11).permutation(np.r_[np.arange(20), 7, 7])
     return np.c_[0.75 + 1.5 * t, -1.0 + 3.5 * t]  # every value is a short dyadic: exact
 
 
-def _single_point(rng):
+def _single_point(rng: np.random.Generator) -> np.ndarray:
     return np.array([[0.3, -1.7]])
 
 
-def _two_points(rng):
+def _two_points(rng: np.random.Generator) -> np.ndarray:
     return np.array([[2.5, 1.0], [-1.0, 4.0]])
 
 
-def _same_place(rng):
+def _same_place(rng: np.random.Generator) -> np.ndarray:
     return np.full((6, 2), [2.0, -3.0])
 
 
-def _square_with_interior(rng):
+def _square_with_interior(rng: np.random.Generator) -> np.ndarray:
     g = np.random.default_rng(4)
     corners = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
     return g.permutation(np.vstack([g.uniform(-0.9, 0.9, size=(40, 2)), corners]))
 
 
-def _large_2000(rng):
+def _large_2000(rng: np.random.Generator) -> np.ndarray:
     return np.random.default_rng(2000).uniform(0.0, 1.0, size=(2000, 2))
 
 
-def _unseen_circle(rng):
+def _unseen_circle(rng: np.random.Generator) -> np.ndarray:
     """Pins on a circle (every one a corner) around a cloud of interior pins."""
     m, k = int(rng.integers(40, 120)), int(rng.integers(20, 80))
     radius, centre = rng.uniform(0.5, 50.0), rng.uniform(-100.0, 100.0, 2)
@@ -245,7 +237,7 @@ def _unseen_circle(rng):
     return rng.permutation(np.vstack([ring, cloud]))
 
 
-def _unseen_lattice(rng):
+def _unseen_lattice(rng: np.random.Generator) -> np.ndarray:
     """Lattice pins in a sheared, cut rectangle: many pins on slanted and straight edges."""
     w, h = int(rng.integers(6, 14)), int(rng.integers(5, 12))
     cut, shear = int(rng.integers(2, min(w, h))), int(rng.integers(-2, 3))
@@ -257,42 +249,39 @@ def _unseen_lattice(rng):
     return rng.permutation(xy * 0.25 + rng.integers(-40, 40, 2) * 0.125)
 
 
-def _unseen_clusters(rng):
+def _unseen_clusters(rng: np.random.Generator) -> np.ndarray:
     """Gaussian clusters of very different sizes and spreads."""
     parts = [rng.uniform(-100, 100, 2) + 10.0 ** rng.uniform(-3, 1) * rng.standard_normal(
         (int(rng.integers(30, 200)), 2)) for _ in range(int(rng.integers(3, 7)))]
     return rng.permutation(np.vstack(parts))
 
 
-def _unseen_tiny(rng):
+def _unseen_tiny(rng: np.random.Generator) -> np.ndarray:
     """A cloud 1e-9 wide far from the origin: determinants of order 1e-18."""
     return rng.uniform(-1000.0, 1000.0, 2) + 1e-9 * rng.uniform(size=(150, 2))
 
 
-@dataclass(frozen=True)
-class PinSet:
-    build: Callable[[np.random.Generator], np.ndarray]
-    weight: int
-    scipy_unique: bool = False  # well conditioned: scipy must find the same hull
-    degenerate: bool = False    # a stub can answer it: earned only with a general hull
-
-
-DATASETS = {
-    "random-300": PinSet(_random_300, 2, scipy_unique=True),
-    "kettner-near-collinear": PinSet(_kettner_near_collinear, 2),
-    "grid-5x5": PinSet(_grid_5x5, 2, scipy_unique=True),
-    "duplicates": PinSet(_duplicates, 1, scipy_unique=True),
-    "all-collinear": PinSet(_all_collinear, 1, degenerate=True),
-    "single-point": PinSet(_single_point, 1, degenerate=True),
-    "two-points": PinSet(_two_points, 1, degenerate=True),
-    "same-place": PinSet(_same_place, 1, degenerate=True),
-    "square-with-interior": PinSet(_square_with_interior, 1, scipy_unique=True),
-    "large-2000": PinSet(_large_2000, 2, scipy_unique=True),
-    "unseen-circle": PinSet(_unseen_circle, 1),
-    "unseen-lattice": PinSet(_unseen_lattice, 2),
-    "unseen-clusters": PinSet(_unseen_clusters, 1),
-    "unseen-tiny": PinSet(_unseen_tiny, 1),
+#: exact hulls: no tolerance anywhere
+DATASETS: dict[str, Dataset[np.ndarray]] = {
+    "random-300": Dataset(_random_300, points=2),
+    "kettner-near-collinear": Dataset(_kettner_near_collinear, points=2),
+    "grid-5x5": Dataset(_grid_5x5, points=2),
+    "duplicates": Dataset(_duplicates),
+    "all-collinear": Dataset(_all_collinear),
+    "single-point": Dataset(_single_point),
+    "two-points": Dataset(_two_points),
+    "same-place": Dataset(_same_place),
+    "square-with-interior": Dataset(_square_with_interior),
+    "large-2000": Dataset(_large_2000, points=2),
+    "unseen-circle": Dataset(_unseen_circle),
+    "unseen-lattice": Dataset(_unseen_lattice, points=2),
+    "unseen-clusters": Dataset(_unseen_clusters),
+    "unseen-tiny": Dataset(_unseen_tiny),
 }
+#: well conditioned: scipy must find the same hull
+SCIPY_UNIQUE = {"random-300", "grid-5x5", "duplicates", "square-with-interior", "large-2000"}
+#: a stub can answer these: earned only with a general hull
+DEGENERATE = {"all-collinear", "single-point", "two-points", "same-place"}
 
 
 def boundary_walk(points: np.ndarray, hull: list[int]) -> list[int]:
@@ -306,8 +295,8 @@ def boundary_walk(points: np.ndarray, hull: list[int]) -> list[int]:
     distinct = np.unique(canon)
     if len(hull) == 1:
         return hull
-    edges = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
-    walk = []
+    edges = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [(hull[0], hull[1])]
+    walk: list[int] = []
     for a, b in edges:
         pa, pb = points[a], points[b]
         lo, hi = np.minimum(pa, pb), np.maximum(pa, pb)
@@ -333,13 +322,12 @@ def oracle(points: np.ndarray, *, scipy_unique: bool) -> tuple[list[int], list[i
     return hull, boundary_walk(points, hull)
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(d.weight))
-                                  for n, d in DATASETS.items()])
-def test_convex_hull(student, credit, rng, name):
-    dataset = DATASETS[name]
-    points = dataset.build(rng)
-    expected, boundary = oracle(points, scipy_unique=dataset.scipy_unique)
-    if dataset.degenerate:
+@over_datasets(DATASETS)
+def test_convex_hull(student: Student, credit: Credit, rng: np.random.Generator,
+                     name: str) -> None:
+    points = DATASETS[name].build(rng)
+    expected, boundary = oracle(points, scipy_unique=name in SCIPY_UNIQUE)
+    if name in DEGENERATE:
         feedback.require_general_case(student.convex_hull, f"{name} case")
     got = student.convex_hull(points)
     feedback.grade_hull(got, points, expected, boundary, credit)

@@ -13,12 +13,15 @@ An orientation check calls :func:`judge_turn` for each triple.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from autograder.checks import (
+    Broken,
     CheckFailure,
+    Conventions,
     Credit,
     describe,
     expect_array,
@@ -29,13 +32,13 @@ from autograder.checks import (
     show_point,
 )
 
-#: fraction of a check's points kept for each convention broken (multiplied together)
-FRACTIONS = {
+#: what a right hull keeps of the points for each convention it breaks (multiplied together)
+CONVENTIONS = Conventions({
     "closed": 0.75,     # first index repeated at the end
     "start": 0.75,      # right cycle, another starting corner
     "clockwise": 0.5,   # right cycle, walked the other way round
     "collinear": 0.5,   # pins in the middle of an edge kept as corners
-}
+})
 
 NAME = "convex_hull(points)"
 
@@ -51,18 +54,15 @@ def _at(points: np.ndarray, i: int) -> str:
     return f"point {i} at {show_point(points[i])}"
 
 
-def _as_indices(got: Any, n: int) -> list[int]:
+def _as_indices(got: object, n: int) -> list[int]:
     """The answer as a list of valid row indices, or a CheckFailure saying what is wrong."""
-    hint = " Return the row numbers of the corner pins, like [2, 1, 4], not their coordinates."
+    hint = "Return the row numbers of the corner pins, like [2, 1, 4], not their coordinates."
     if isinstance(got, (list, tuple, np.ndarray)) and len(got) == 0:
         raise CheckFailure(f"{NAME} returned an empty list; every set of pins has at least "
                            "one hull corner.")
-    try:
-        arr = expect_array(got, dtype_kind="iu", name=NAME)
-    except CheckFailure as exc:
-        raise CheckFailure(f"{exc}{hint}") from None
+    arr = expect_array(got, dtype_kind="iu", name=NAME, hint=hint)
     if arr.ndim != 1:
-        raise CheckFailure(f"{NAME} should be a flat list of indices; got {describe(got)}."
+        raise CheckFailure(f"{NAME} should be a flat list of indices; got {describe(got)}. "
                            + hint)
     bad = [int(i) for i in arr if not 0 <= int(i) < n]
     if bad:
@@ -78,9 +78,9 @@ def _collapse_repeats(walk: list[int]) -> list[int]:
     return [v for k, v in enumerate(walk) if v != walk[k - 1]] or walk[:1]
 
 
-def judge_hull(got: Any, points: np.ndarray, expected: Sequence[int],
-               boundary: Sequence[int]) -> tuple[float, str]:
-    """Return ``(fraction, message)`` for a hull answer; raise CheckFailure when it is wrong.
+def judge_hull(got: object, points: ArrayLike, expected: Sequence[int],
+               boundary: Sequence[int]) -> Broken:
+    """The conventions a right hull answer breaks; raise CheckFailure when it is wrong.
 
     ``expected`` is the hull in canonical indices (counter-clockwise from the
     lexicographically smallest pin); ``boundary`` lists every distinct pin on
@@ -90,16 +90,16 @@ def judge_hull(got: Any, points: np.ndarray, expected: Sequence[int],
     canon = canonical_indices(points)
     hull = _as_indices(got, len(points))
     walk = [int(canon[i]) for i in hull]
-    issues: dict[str, str] = {}
+    broken = CONVENTIONS.record()
 
     if len(walk) > 1 and walk[-1] == walk[0]:
-        issues["closed"] = (f"your list ends with its first corner again (index {hull[-1]}); "
-                            "list each corner once, the band closes by itself")
+        broken.note("closed", f"your list ends with its first corner again (index {hull[-1]}); "
+                              "list each corner once, the band closes by itself")
         walk = walk[:-1]
     collapsed = _collapse_repeats(walk)
     if len(collapsed) < len(walk):
-        issues["collinear"] = ("your list names the same place twice in a row (pins at "
-                               "exactly the same place count once)")
+        broken.note("collinear", "your list names the same place twice in a row (pins at "
+                                 "exactly the same place count once)")
     expected = [int(canon[v]) for v in expected]
     boundary = [int(canon[v]) for v in boundary]
     on_boundary = set(boundary)
@@ -107,18 +107,25 @@ def judge_hull(got: Any, points: np.ndarray, expected: Sequence[int],
 
     extra = list(dict.fromkeys(v for v in collapsed if v not in set(expected)))
     if extra:
-        issues["collinear"] = (f"your hull keeps {_at(points, extra[0])}, which lies on a hull "
-                               "edge without being a corner; when pins are collinear keep only "
-                               "the farthest" + (f" ({len(extra)} such pins)" if len(extra) > 1
-                                                  else ""))
+        broken.note("collinear", f"your hull keeps {_at(points, extra[0])}, which lies on a hull "
+                                 "edge without being a corner; when pins are collinear keep "
+                                 "only the farthest" + _how_many(extra, "such pins"),
+                    replace=True)
     if len(expected) > 2:
-        _check_order(collapsed, [v for v in boundary if v in set(collapsed)], points, issues)
+        _check_order(collapsed, [v for v in boundary if v in set(collapsed)], points, broken)
     elif not extra and len(expected) == 2 and collapsed[0] != expected[0]:
-        issues["start"] = (f"start at the lexicographically smallest point (index "
-                           f"{expected[0]}): smallest x, then smallest y")
+        broken.note("start", _start_at(expected[0]))
+    return broken
 
-    fraction = float(np.prod([FRACTIONS[k] for k in issues])) if issues else 1.0
-    return fraction, (sentence("; ".join(issues.values())) if issues else "")
+
+def _how_many(items: Sequence[int], what: str) -> str:
+    """`` (3 such pins)`` after a message about the first of several items; nothing for one."""
+    return f" ({len(items)} {what})" if len(items) > 1 else ""
+
+
+def _start_at(index: int) -> str:
+    return (f"start at the lexicographically smallest point (index {index}): smallest x, "
+            "then smallest y")
 
 
 def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int],
@@ -130,18 +137,18 @@ def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int]
     parts = []
     if missing:
         parts.append(f"{_at(points, missing[0])} is on the hull but missing"
-                     + (f" ({len(missing)} corners are missing)" if len(missing) > 1 else ""))
+                     + _how_many(missing, "corners are missing"))
     if inside:
         parts.append(f"{_at(points, inside[0])} is not on the hull's boundary, so it is not "
-                     "a corner" + (f" ({len(inside)} such pins)" if len(inside) > 1 else ""))
+                     "a corner" + _how_many(inside, "such pins"))
     middle = [v for v in collapsed if v in on_boundary and v not in set(expected)]
     if missing and middle:
         parts.append(f"you returned {_at(points, middle[0])}, which lies on the boundary "
                      "between two corners (in the middle of an edge), so it is not a corner"
-                     + (f" ({len(middle)} such pins)" if len(middle) > 1 else ""))
+                     + _how_many(middle, "such pins"))
     if parts:
-        raise CheckFailure(f"Expected {len(expected)} hull vertices, got {got_len}; "
-                           + "; ".join(parts) + ".")
+        raise CheckFailure(sentence(f"Expected {len(expected)} hull vertices, got {got_len}; "
+                                    + "; ".join(parts)))
     twice = next((v for v in collapsed if collapsed.count(v) > 1), None)
     if twice is not None and len(expected) > 2:
         raise CheckFailure(sentence(f"{_at(points, twice)} appears {collapsed.count(twice)} "
@@ -149,20 +156,18 @@ def _check_pins(collapsed: list[int], expected: list[int], on_boundary: set[int]
 
 
 def _check_order(collapsed: list[int], order: list[int], points: np.ndarray,
-                 issues: dict[str, str]) -> None:
+                 broken: Broken) -> None:
     """Compare the order with the counter-clockwise boundary walk restricted to the same pins."""
     if collapsed == order:
         return
     if same_cycle(collapsed, order):
-        issues["start"] = (f"start at the lexicographically smallest point (index {order[0]}): "
-                           "smallest x, then smallest y")
+        broken.note("start", _start_at(order[0]))
         return
     if is_rotation_reversed(collapsed, order):
-        issues["clockwise"] = ("your hull is correct but clockwise: list the vertices "
-                               "counter-clockwise (left turns)")
+        broken.note("clockwise", "your hull is correct but clockwise: list the vertices "
+                                 "counter-clockwise (left turns)")
         if collapsed[0] != order[0]:
-            issues["start"] = (f"start at the lexicographically smallest point (index "
-                               f"{order[0]}): smallest x, then smallest y")
+            broken.note("start", _start_at(order[0]))
         return
     k = collapsed.index(order[0])
     walk = collapsed[k:] + collapsed[:k]
@@ -173,12 +178,10 @@ def _check_order(collapsed: list[int], order: list[int], points: np.ndarray,
         f"{_at(points, order[step])}, not {_at(points, walk[step])}.")
 
 
-def grade_hull(got: Any, points: np.ndarray, expected: Sequence[int],
+def grade_hull(got: object, points: ArrayLike, expected: Sequence[int],
                boundary: Sequence[int], credit: Credit) -> None:
     """Judge the answer and end the check: pass, ``credit.partial(...)``, or CheckFailure."""
-    fraction, message = judge_hull(got, points, expected, boundary)
-    if fraction < 1.0:
-        credit.partial(fraction, message)
+    judge_hull(got, points, expected, boundary).finish(credit)
 
 
 #: A general pin set, small enough to check by hand: degenerate cases (one pin, pins in
@@ -188,7 +191,7 @@ GENERAL_POINTS = np.array([[0.0, 0.0], [4.0, 0.0], [1.0, 1.0], [4.0, 3.0], [2.0,
 GENERAL_HULL = [0, 1, 3, 4, 5]
 
 
-def require_general_case(hull: Callable[[np.ndarray], Any], what: str) -> None:
+def require_general_case(hull: Callable[[np.ndarray], object], what: str) -> None:
     """Fail unless ``hull`` finds the hull of :data:`GENERAL_POINTS` (up to conventions).
 
     A degenerate case is answered right by many stubs (``return [0]``, a constant list);
@@ -212,7 +215,7 @@ def _signed(value: int) -> str:
     return f"{value:+d}" if value else "0"
 
 
-def require_general_turns(orientation: Callable[..., Any], what: str) -> None:
+def require_general_turns(orientation: Callable[..., object], what: str) -> None:
     """Fail unless ``orientation`` gets a left and a right turn right.
 
     ``return 0`` answers every collinear triple; collinear cases are earned only by a
@@ -227,7 +230,8 @@ def require_general_turns(orientation: Callable[..., Any], what: str) -> None:
                                f"left turns from right turns, and it does not: {exc}") from None
 
 
-def judge_turn(got: Any, p: Any, q: Any, r: Any, expected: int, *, hint: str = "") -> None:
+def judge_turn(got: object, p: ArrayLike, q: ArrayLike, r: ArrayLike, expected: int, *,
+               hint: str = "") -> None:
     """Raise CheckFailure unless ``got`` is the integer ``expected`` (+1, -1 or 0)."""
     call = f"orientation({show_point(p)}, {show_point(q)}, {show_point(r)})"
     value = expect_int(got, name=call)

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-
 import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Student
 
 PINS_CSV = Path(__file__).resolve().parents[2] / "data" / "pins.csv"
 
@@ -64,7 +64,7 @@ PINS_BOUNDARY = [12, 5, 4, 1, 7, 14, 26, 15, 8, 28]
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("case", list(TURNS))
-def test_orientation_small(student, case):
+def test_orientation_small(student: Student, case: str) -> None:
     if case == "collinear":
         feedback.require_general_turns(student.orientation, "collinear cases")
     for p, q, r, expected in TURNS[case]:
@@ -73,7 +73,7 @@ def test_orientation_small(student, case):
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("case", list(HULLS))
-def test_convex_hull_small(student, credit, case):
+def test_convex_hull_small(student: Student, credit: Credit, case: str) -> None:
     raw, expected, boundary = HULLS[case]
     points = np.array(raw, dtype=float)
     if case in DEGENERATE:
@@ -83,7 +83,7 @@ def test_convex_hull_small(student, credit, case):
 
 
 @pytest.mark.points(2)
-def test_convex_hull_pins(student, credit):
+def test_convex_hull_pins(student: Student, credit: Credit) -> None:
     points = np.loadtxt(PINS_CSV, delimiter=",", skiprows=1)
     got = student.convex_hull(points)
     feedback.grade_hull(got, points, PINS_HULL, PINS_BOUNDARY, credit)

@@ -32,15 +32,16 @@ IMA Journal of Numerical Analysis 24(4), 547-556, 2004. doi:10.1093/imanum/24.4.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike
 from scipy.interpolate import barycentric_interpolate as scipy_barycentric
 
-from autograder.compare import expect_array
-
+import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Dataset, Feedback, Student, expect_array, over_datasets
 from reference import (
     barycentric_interpolate,
     barycentric_weights,
@@ -50,9 +51,6 @@ from reference import (
     equispaced_weights,
     lebesgue_constant,
 )
-
-
-import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
 
 U = 2.0**-53
 SLACK = 10.0
@@ -72,7 +70,7 @@ def unseen_degree(rng: np.random.Generator, low: int, high: int, *, odd: bool = 
     return int(rng.choice(choices))
 
 
-def runge(x):
+def runge(x: ArrayLike) -> np.ndarray:
     return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
 
 
@@ -97,20 +95,21 @@ NODE_FAMILIES = {
                   lambda n: {FIRST_KIND: chebyshev_nodes(n, kind=1)}),
 }
 
-#: name -> degree (from the rng for unseen)
-NODE_DEGREES = {
-    "degree-1": lambda rng: 1,
-    "unseen": lambda rng: unseen_degree(rng, 5, 99),
-    "large-1000": lambda rng: 1000,
+#: name -> degree (from the rng for unseen); tolerance: NODE_ATOL of interp_feedback.py
+NODE_DEGREES: dict[str, Dataset[int]] = {
+    "degree-1": Dataset(lambda rng: 1),
+    "unseen": Dataset(lambda rng: unseen_degree(rng, 5, 99)),
+    "large-1000": Dataset(lambda rng: 1000),
 }
 
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("degree", list(NODE_DEGREES))
 @pytest.mark.parametrize("family", list(NODE_FAMILIES))
-def test_nodes(student, credit, rng, family, degree):
+def test_nodes(student: Student, credit: Credit, rng: np.random.Generator, family: str,
+               degree: str) -> None:
     make, what, known = NODE_FAMILIES[family]
-    n = NODE_DEGREES[degree](rng)
+    n = NODE_DEGREES[degree].build(rng)
     name = f"{family}_nodes"
     got = getattr(student, name)(n)
     fb.judge_nodes(got, make(n), call=f"{name}({n})", what=what, credit=credit,
@@ -131,25 +130,19 @@ def _alternating(n: int) -> np.ndarray:
     return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
 
 
-@dataclass(frozen=True)
-class WeightCase:
-    family: str
-    degree: Callable[[np.random.Generator], int]
-    weight: int
-
-
-WEIGHT_CASES = {
-    "equispaced-degree-1": WeightCase("equispaced", lambda rng: 1, 1),
-    "equispaced-unseen": WeightCase("equispaced", lambda rng: unseen_degree(rng, 5, 60), 1),
+#: name -> (family, degree); tolerances: WEIGHT_RTOL and WEIGHT_ATOL of interp_feedback.py
+WEIGHT_CASES: dict[str, Dataset[tuple[str, int]]] = {
+    "equispaced-degree-1": Dataset(lambda rng: ("equispaced", 1)),
+    "equispaced-unseen": Dataset(lambda rng: ("equispaced", unseen_degree(rng, 5, 60))),
     # 200! (about 7.9e374) overflows: factorial formulas give inf / inf = nan
-    "equispaced-factorials-overflow-200": WeightCase("equispaced", lambda rng: 200, 2),
+    "equispaced-factorials-overflow-200": Dataset(lambda rng: ("equispaced", 200), points=2),
     # C(1100, 550) (about 3.3e329) overflows: raw binomials give inf or raise
-    "equispaced-binomials-overflow-1100": WeightCase("equispaced", lambda rng: 1100, 2),
+    "equispaced-binomials-overflow-1100": Dataset(lambda rng: ("equispaced", 1100), points=2),
     # 2**1500 overflows and 2**-1500 underflows: scaling by 2**n fails both ways
-    "equispaced-underflow-1500": WeightCase("equispaced", lambda rng: 1500, 1),
-    "chebyshev-degree-1": WeightCase("chebyshev", lambda rng: 1, 1),
-    "chebyshev-unseen": WeightCase("chebyshev", lambda rng: unseen_degree(rng, 5, 500), 1),
-    "chebyshev-large-5000": WeightCase("chebyshev", lambda rng: 5000, 1),
+    "equispaced-underflow-1500": Dataset(lambda rng: ("equispaced", 1500)),
+    "chebyshev-degree-1": Dataset(lambda rng: ("chebyshev", 1)),
+    "chebyshev-unseen": Dataset(lambda rng: ("chebyshev", unseen_degree(rng, 5, 500))),
+    "chebyshev-large-5000": Dataset(lambda rng: ("chebyshev", 5000)),
 }
 
 WEIGHT_FAMILIES = {
@@ -160,13 +153,11 @@ WEIGHT_FAMILIES = {
 }
 
 
-@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.points(c.weight))
-                                  for k, c in WEIGHT_CASES.items()])
-def test_weights(student, rng, case):
-    spec = WEIGHT_CASES[case]
-    make, hint, known = WEIGHT_FAMILIES[spec.family]
-    n = spec.degree(rng)
-    name = f"{spec.family}_weights"
+@over_datasets(WEIGHT_CASES, "case")
+def test_weights(student: Student, rng: np.random.Generator, case: str) -> None:
+    family, n = WEIGHT_CASES[case].build(rng)
+    make, hint, known = WEIGHT_FAMILIES[family]
+    name = f"{family}_weights"
     call = f"{name}({n})"
     got = fb.call_weights(getattr(student, name), n, call=call, hint=hint)
     fb.judge_weights(got, make(n), call=call, n=n, hint=hint, known=known(n))
@@ -199,7 +190,7 @@ class Problem:
         return tolerance(self.x, self.f)
 
 
-def _lecture_runge(rng):
+def _lecture_runge(rng: np.random.Generator) -> Problem:
     n = 15
     x = equispaced_nodes(n)
     w = np.array([(-1) ** j * math.comb(n, j) for j in range(n + 1)], dtype=float)
@@ -207,7 +198,7 @@ def _lecture_runge(rng):
                    "Runge's function in 16 equispaced nodes, the lecture's weights (-1)^j C(15, j)")
 
 
-def _scaled_chebyshev(rng):
+def _scaled_chebyshev(rng: np.random.Generator) -> Problem:
     n = 25
     x = chebyshev_nodes(n)
     return Problem(x, 3.7 * chebyshev_weights(n), runge(x), rng.uniform(-1, 1, 400),
@@ -215,18 +206,18 @@ def _scaled_chebyshev(rng):
                    "the ends")
 
 
-def _large_chebyshev(rng):
+def _large_chebyshev(rng: np.random.Generator) -> Problem:
     n = 300
     x = chebyshev_nodes(n)
     return Problem(x, 1e-7 * chebyshev_weights(n), np.exp(x) * np.sin(5 * x),
                    rng.uniform(-1, 1, 500), "exp(x) sin(5x) in 301 Chebyshev points")
 
 
-def _cubic(s):
+def _cubic(s: np.ndarray) -> np.ndarray:
     return 2 * s**3 - s + 0.5
 
 
-def _random_nodes(rng):
+def _random_nodes(rng: np.random.Generator) -> Problem:
     """12 random nodes, at least 0.03 apart, in random order; a cubic is reproduced."""
     while True:
         x = rng.uniform(-1, 1, 12)
@@ -237,14 +228,14 @@ def _random_nodes(rng):
                    "a cubic in 12 random nodes, not sorted, weights with the opposite sign")
 
 
-def _unseen_abs(rng):
+def _unseen_abs(rng: np.random.Generator) -> Problem:
     n = unseen_degree(rng, 41, 199)
     x = chebyshev_nodes(n)
     t = rng.uniform(-1, 1, unseen_degree(rng, 90, 400))
     return Problem(x, chebyshev_weights(n), np.abs(x), t, f"|x| in {n + 1} Chebyshev points")
 
 
-def _unseen_equispaced(rng):
+def _unseen_equispaced(rng: np.random.Generator) -> Problem:
     n = unseen_degree(rng, 5, 28)
     x = equispaced_nodes(n)
     return Problem(x, equispaced_weights(n) * 2.0**-20, runge(x),
@@ -252,28 +243,28 @@ def _unseen_equispaced(rng):
                    f"Runge's function in {n + 1} equispaced nodes")
 
 
-def _other_interval(rng):
+def _other_interval(rng: np.random.Generator) -> Problem:
     n = 30
     x = 5.0 + 5.0 * chebyshev_nodes(n)
     return Problem(x, chebyshev_weights(n), np.sqrt(1.0 + x), rng.uniform(0, 10, 200),
                    "sqrt(1 + x) in 31 Chebyshev points of [0, 10]")
 
 
-VALUE_CASES = {
-    "runge-equispaced-lecture-weights": _lecture_runge,
-    "runge-chebyshev-scaled-weights": _scaled_chebyshev,
-    "smooth-chebyshev-301-nodes": _large_chebyshev,
-    "cubic-random-unsorted-nodes": _random_nodes,
-    "unseen-abs-chebyshev": _unseen_abs,
-    "unseen-runge-equispaced": _unseen_equispaced,
-    "sqrt-chebyshev-on-0-10": _other_interval,
+#: the tolerance of each problem is Higham's bound for its nodes and data: Problem.tol
+VALUE_CASES: dict[str, Dataset[Problem]] = {
+    "runge-equispaced-lecture-weights": Dataset(_lecture_runge, points=2),
+    "runge-chebyshev-scaled-weights": Dataset(_scaled_chebyshev, points=2),
+    "smooth-chebyshev-301-nodes": Dataset(_large_chebyshev, points=2),
+    "cubic-random-unsorted-nodes": Dataset(_random_nodes, points=2),
+    "unseen-abs-chebyshev": Dataset(_unseen_abs, points=2),
+    "unseen-runge-equispaced": Dataset(_unseen_equispaced, points=2),
+    "sqrt-chebyshev-on-0-10": Dataset(_other_interval, points=2),
 }
 
 
-@pytest.mark.points(2)
-@pytest.mark.parametrize("case", list(VALUE_CASES))
-def test_interp(student, credit, rng, case):
-    p = VALUE_CASES[case](rng)
+@over_datasets(VALUE_CASES, "case")
+def test_interp(student: Student, credit: Credit, rng: np.random.Generator, case: str) -> None:
+    p = VALUE_CASES[case].build(rng)
     got = student.lagrange_interp(p.f, p.x, p.w, p.t)
     fb.judge_values(got, p.expected(), t=p.t, nodes=p.x, tol=p.tol(), credit=credit,
                     call=f"lagrange_interp ({p.about})")
@@ -283,19 +274,20 @@ def test_interp(student, credit, rng, case):
 # shapes: scalar in, scalar out; array in, array of the same shape out
 # ---------------------------------------------------------------------------
 
-SHAPES = {
-    "scalar": lambda rng: 0.3,
-    "one-point-array": lambda rng: np.array([0.3]),
-    "matrix": lambda rng: rng.uniform(-1, 1, (6, 7)),
+#: the points t of each shape
+SHAPES: dict[str, Dataset[float | np.ndarray]] = {
+    "scalar": Dataset(lambda rng: 0.3),
+    "one-point-array": Dataset(lambda rng: np.array([0.3])),
+    "matrix": Dataset(lambda rng: rng.uniform(-1, 1, (6, 7))),
 }
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("shape", list(SHAPES))
-def test_interp_shapes(student, credit, rng, shape):
+@over_datasets(SHAPES, "shape")
+def test_interp_shapes(student: Student, credit: Credit, rng: np.random.Generator,
+                       shape: str) -> None:
     n = 8
     x, w = chebyshev_nodes(n), chebyshev_weights(n)
-    t = SHAPES[shape](rng)
+    t = SHAPES[shape].build(rng)
     got = student.lagrange_interp(runge(x), x, w, t)
     call = f"lagrange_interp(f, x, w, t) with t of shape {np.shape(t)}"
     if np.ndim(t) == 0:
@@ -310,7 +302,7 @@ def test_interp_shapes(student, credit, rng, shape):
 
 
 @pytest.mark.points(2)
-def test_exact_at_all_nodes(student, rng):
+def test_exact_at_all_nodes(student: Student, rng: np.random.Generator) -> None:
     n = unseen_degree(rng, 5, 60)
     x = equispaced_nodes(n)
     f = runge(x)
@@ -321,7 +313,7 @@ def test_exact_at_all_nodes(student, rng):
 
 
 @pytest.mark.points(1)
-def test_exact_at_each_node_scalar(student, rng):
+def test_exact_at_each_node_scalar(student: Student, rng: np.random.Generator) -> None:
     n = 300
     x, w = chebyshev_nodes(n), chebyshev_weights(n)
     f = np.exp(x) * np.cos(3 * x)
@@ -331,7 +323,8 @@ def test_exact_at_each_node_scalar(student, rng):
 
 
 @pytest.mark.points(1)
-def test_nodes_among_points(student, credit, rng):
+def test_nodes_among_points(student: Student, credit: Credit,
+                            rng: np.random.Generator) -> None:
     n = unseen_degree(rng, 21, 60)
     x, w = chebyshev_nodes(n), chebyshev_weights(n)
     f = np.tanh(3 * x)
@@ -347,7 +340,11 @@ def test_nodes_among_points(student, credit, rng):
                     tol=tolerance(x, f), credit=credit, call=call)
 
 
-def _next_to_nodes(rng):
+#: nodes x, weights w, data f, points t, and what they are
+NearCase = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]
+
+
+def _next_to_nodes(rng: np.random.Generator) -> NearCase:
     n = unseen_degree(rng, 21, 80, odd=True)  # odd: no node at 0 (that case is below)
     x = chebyshev_nodes(n)
     inner = x[1:-1]
@@ -356,20 +353,23 @@ def _next_to_nodes(rng):
     return x, chebyshev_weights(n), np.cos(2 * x) + x, t, f"{n + 1} Chebyshev points"
 
 
-def _next_to_zero(rng):
+def _next_to_zero(rng: np.random.Generator) -> NearCase:
     n = 16
     x = equispaced_nodes(n)  # node 8 is exactly 0
     t = np.array([5e-324, -5e-324, 2.5e-320, 1e-310, -3e-308])
     return x, equispaced_weights(n), runge(x), t, "17 equispaced nodes, t next to the node 0"
 
 
-NEAR = {"next-to-nodes": (_next_to_nodes, 2), "next-to-zero-subnormal": (_next_to_zero, 1)}
+NEAR: dict[str, Dataset[NearCase]] = {
+    "next-to-nodes": Dataset(_next_to_nodes, points=2),
+    "next-to-zero-subnormal": Dataset(_next_to_zero),
+}
 
 
-@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.points(v[1]))
-                                  for k, v in NEAR.items()])
-def test_near_nodes(student, credit, rng, case):
-    x, w, f, t, about = NEAR[case][0](rng)
+@over_datasets(NEAR, "case")
+def test_near_nodes(student: Student, credit: Credit, rng: np.random.Generator,
+                    case: str) -> None:
+    x, w, f, t, about = NEAR[case].build(rng)
     got = student.lagrange_interp(f, x, w, t)
     fb.judge_values(got, barycentric_interpolate(x, f, t, w), t=t, nodes=x,
                     tol=tolerance(x, f), credit=credit,
@@ -388,14 +388,17 @@ def _interpolant(family: str, m: int) -> Callable[[np.ndarray], np.ndarray]:
     return lambda s: barycentric_interpolate(x, runge(x), s, w)
 
 
-PLOTS = {"degree-12": (lambda rng: 12, 3),
-         "unseen": (lambda rng: unseen_degree(rng, 6, 30), 2)}
+#: the degree n of each plot; curves are found within CURVE_RTOL of interp_feedback.py
+PLOTS: dict[str, Dataset[int]] = {
+    "degree-12": Dataset(lambda rng: 12, points=3),
+    "unseen": Dataset(lambda rng: unseen_degree(rng, 6, 30), points=2),
+}
 
 
-@pytest.mark.parametrize("case", [pytest.param(k, marks=pytest.mark.points(v[1]))
-                                  for k, v in PLOTS.items()])
-def test_plot_runge(student, credit, feedback, rng, case):
-    n = PLOTS[case][0](rng)
+@over_datasets(PLOTS, "case")
+def test_plot_runge(student: Student, credit: Credit, feedback: Feedback,
+                    rng: np.random.Generator, case: str) -> None:
+    n = PLOTS[case].build(rng)
     figure, note, call = fb.draw_runge_plot(student, feedback, n)
     wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
               fb.Curve("the equispaced interpolant", _interpolant("equispaced", n)),

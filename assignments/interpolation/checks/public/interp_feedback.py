@@ -13,21 +13,26 @@ so this module gives away no solution.
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping, NamedTuple, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from autograder.checks import (
     CheckFailure,
+    Conventions,
     Credit,
     Feedback,
+    FigureData,
     Student,
+    call_for_figure,
     describe,
     expect_array,
-    figure_png,
+    explain_errors,
+    sentences,
     show_number,
 )
-from autograder.errors import StudentException
 
 # ---------------------------------------------------------------------------
 # tolerances, each with its reason
@@ -60,12 +65,12 @@ MIN_CURVE_POINTS = 50
 CURVE_REACH = 0.95
 
 #: Share of a check's points kept when the maths is right but a convention is not.
-FRACTIONS = {
+CONVENTIONS = Conventions({
     "descending": 0.5,       # the right nodes, listed from +1 down to -1
     "first-form": 0.5,       # the first barycentric form: values scaled by the weights' scale
     "array-for-scalar": 0.5,  # an array of one value for a scalar t
     "no-return": 0.5,         # plot_runge drew a figure but did not return it
-}
+})
 
 
 #: How to keep equispaced weights finite (shown when they overflow or underflow).
@@ -80,33 +85,15 @@ CHEBYSHEV_HINT = ("Chebyshev weights need no large numbers: w_j = (-1)^j, halved
                   "and j = n.")
 
 
-#: A number written so that pasting it back gives the same double.
-show = show_number
-
-
-def _sentence(parts: Sequence[str]) -> str:
-    """Join clauses as sentences; a clause that starts with code keeps its case."""
-    def capital(p: str) -> str:
-        first = p.split(" ", 1)[0]
-        return p if not first.isalpha() else p[:1].upper() + p[1:]
-    return " ".join(capital(p) + ("" if p.endswith(".") else ".") for p in parts)
-
-
 # ---------------------------------------------------------------------------
 # calling the student
 # ---------------------------------------------------------------------------
 
 
-def call_weights(fn: Callable[[int], Any], n: int, *, call: str, hint: str) -> Any:
+def call_weights(fn: Callable[[int], object], n: int, *, call: str, hint: str) -> object:
     """``fn(n)``, turning an ``OverflowError`` raised inside it into a readable failure."""
-    try:
+    with explain_errors(call, {"OverflowError": f"Your weights overflow for n = {n}. {hint}"}):
         return fn(n)
-    except StudentException as exc:
-        if "OverflowError" not in str(exc):
-            raise
-        error = str(exc.args[0]).split(" raised ", 1)[-1]
-        raise CheckFailure(f"{call} raised {error}. Your weights overflow for n = {n}. "
-                           f"{hint}") from None
 
 
 # ---------------------------------------------------------------------------
@@ -118,7 +105,7 @@ def _close(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
     return a.shape == b.shape and bool(np.all(np.abs(a - b) <= atol))
 
 
-def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit: Credit,
+def judge_nodes(got: object, expected: np.ndarray, *, call: str, what: str, credit: Credit,
                 known: Mapping[str, np.ndarray] | None = None) -> None:
     """Nodes: n + 1 of them, finite, ascending, equal to ``expected`` within ``NODE_ATOL``.
 
@@ -146,9 +133,9 @@ def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit:
     if m > 1 and _close(arr, expected[::-1], NODE_ATOL):
         fix = " (x_j = -cos(j pi / n) rises from -1 to 1; cos(j pi / n) falls)" \
             if "Chebyshev" in what else ""
-        credit.partial(FRACTIONS["descending"],
-                       f"{call}: your {what} are in descending order; the assignment asks "
-                       f"for ascending{fix}.")
+        CONVENTIONS.partial(credit, "descending",
+                            f"{call}: your {what} are in descending order; the assignment "
+                            f"asks for ascending{fix}.")
     for message, wrong in (known or {}).items():
         if _close(arr, np.asarray(wrong, dtype=float), NODE_ATOL):
             raise CheckFailure(f"{call}: {message}")
@@ -156,18 +143,19 @@ def judge_nodes(got: Any, expected: np.ndarray, *, call: str, what: str, credit:
 
 
 def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
-    parts = []
+    parts: list[str] = []
     if abs(arr[0] - expected[0]) > NODE_ATOL or abs(arr[-1] - expected[-1]) > NODE_ATOL:
-        parts.append(f"the nodes should run from {show(expected[0])} to {show(expected[-1])}; "
-                     f"yours run from {show(arr[0])} to {show(arr[-1])}")
+        parts.append(f"the nodes should run from {show_number(expected[0])} to "
+                     f"{show_number(expected[-1])}; yours run from {show_number(arr[0])} to "
+                     f"{show_number(arr[-1])}")
     steps = np.flatnonzero(np.diff(arr) <= 0)
     if steps.size:
         j = int(steps[0])
-        parts.append(f"the nodes must be ascending, but node {j + 1} ({show(arr[j + 1])}) "
-                     f"is not larger than node {j} ({show(arr[j])})")
+        parts.append(f"the nodes must be ascending, but node {j + 1} ({show_number(arr[j + 1])}) "
+                     f"is not larger than node {j} ({show_number(arr[j])})")
     err = np.abs(arr - expected)
     j = int(np.argmax(err))
-    parts.append(f"node {j} is {show(arr[j])}, expected {show(expected[j])} (error "
+    parts.append(f"node {j} is {show_number(arr[j])}, expected {show_number(expected[j])} (error "
                  f"{err[j]:.2e}, allowed {NODE_ATOL:.0e}); {int((err > NODE_ATOL).sum())} of "
                  f"{arr.size} nodes are off")
     return f"{call}: " + "; ".join(parts) + "."
@@ -178,7 +166,7 @@ def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
 # ---------------------------------------------------------------------------
 
 
-def judge_weights(got: Any, expected: np.ndarray, *, call: str, n: int, hint: str = "",
+def judge_weights(got: object, expected: np.ndarray, *, call: str, n: int, hint: str = "",
                   known: Mapping[str, np.ndarray] | None = None) -> None:
     """Weights at any common scale: ``got / got[k]`` against ``expected / expected[k]``.
 
@@ -238,11 +226,11 @@ def _where(t: float, nodes: np.ndarray) -> str:
     """Where ``t`` lies relative to the nodes: on one, next to one, or between."""
     j = int(np.argmin(np.abs(nodes - t)))
     if t == nodes[j]:
-        return f"t = {show(t)}, which is node x_{j}"
+        return f"t = {show_number(t)}, which is node x_{j}"
     gap = abs(t - nodes[j])
     if gap <= 4 * np.spacing(max(abs(nodes[j]), abs(t))) or gap < 1e-300:
-        return f"t = {show(t)}, right next to node x_{j} = {show(nodes[j])}"
-    return f"t = {show(t)}"
+        return f"t = {show_number(t)}, right next to node x_{j} = {show_number(nodes[j])}"
+    return f"t = {show_number(t)}"
 
 
 def scale_factor(got: np.ndarray, expected: np.ndarray, off_node: np.ndarray,
@@ -265,7 +253,7 @@ def scale_factor(got: np.ndarray, expected: np.ndarray, off_node: np.ndarray,
     return None
 
 
-def judge_values(got: Any, expected: np.ndarray, *, t: np.ndarray, nodes: np.ndarray,
+def judge_values(got: object, expected: ArrayLike, *, t: ArrayLike, nodes: np.ndarray,
                  tol: float, call: str, credit: Credit) -> None:
     """Values of the interpolant at ``t``: same shape, no NaN, within ``tol`` (absolute)."""
     expected = np.asarray(expected, dtype=float)
@@ -293,12 +281,12 @@ def judge_values(got: Any, expected: np.ndarray, *, t: np.ndarray, nodes: np.nda
         return
     c = scale_factor(flat, want, ~np.isin(tt, nodes))
     if c is not None:
-        credit.partial(FRACTIONS["first-form"],
-                       f"{call}: every value is {c:.6g} times the interpolant. That is what the "
-                       "first barycentric form l(t) sum_j w_j f_j / (t - x_j) gives when the "
-                       "weights come at another scale. The weights may have any common scale: "
-                       "divide by sum_j w_j / (t - x_j) (the second form), and the scale "
-                       "cancels.")
+        CONVENTIONS.partial(credit, "first-form",
+                            f"{call}: every value is {c:.6g} times the interpolant. That is "
+                            "what the first barycentric form l(t) sum_j w_j f_j / (t - x_j) "
+                            "gives when the weights come at another scale. The weights may "
+                            "have any common scale: divide by sum_j w_j / (t - x_j) (the "
+                            "second form), and the scale cancels.")
     i = int(np.argmax(err))
     raise CheckFailure(f"{call} is off at {_where(tt[i], nodes)} (entry {i}): expected "
                        f"{want[i]:.15g}, got {flat[i]:.15g} (error {err[i]:.2e}, allowed "
@@ -316,7 +304,7 @@ def _nan_hint(t: float, nodes: np.ndarray) -> str:
             "nearest node (it cancels in the quotient) so that no term overflows.")
 
 
-def judge_exact(got: Any, fvals: np.ndarray, nodes: np.ndarray, index: np.ndarray, *,
+def judge_exact(got: object, fvals: np.ndarray, nodes: np.ndarray, index: np.ndarray, *,
                 call: str) -> None:
     """At ``t = nodes[index]`` the answer must be ``fvals[index]``, bit for bit."""
     index = np.asarray(index)
@@ -329,12 +317,13 @@ def judge_exact(got: Any, fvals: np.ndarray, nodes: np.ndarray, index: np.ndarra
         j = int(j)
         if not arr[i] == fvals[j]:  # also catches nan
             raise CheckFailure(
-                f"lagrange_interp returned {show(arr[i])} at node x_{j} = {show(nodes[j])}; "
-                f"it must return fvals[{j}] = {show(fvals[j])} exactly. Compare t == xnodes[j] "
+                f"lagrange_interp returned {show_number(arr[i])} at node x_{j} = "
+                f"{show_number(nodes[j])}; it must return fvals[{j}] = {show_number(fvals[j])} "
+                "exactly. Compare t == xnodes[j] "
                 "exactly (not with a tolerance) and return fvals[j] there.")
 
 
-def judge_scalar(got: Any, *, call: str, credit: Credit) -> float:
+def judge_scalar(got: object, *, call: str, credit: Credit) -> float:
     """A scalar ``t`` gives a scalar: a float, or a 0-d array. Returns the value."""
     if isinstance(got, bool) or got is None or isinstance(got, (str, dict)):
         raise CheckFailure(f"{call} should return a number for a scalar t; got {describe(got)}.")
@@ -342,10 +331,10 @@ def judge_scalar(got: Any, *, call: str, credit: Credit) -> float:
     if arr.ndim == 0:
         return float(arr)
     if arr.size == 1:
-        credit.partial(FRACTIONS["array-for-scalar"],
-                       f"{call} returned {describe(got)} for a scalar t; return a scalar "
-                       "(a float) when t is a scalar, e.g. with float(...) or result[()] "
-                       "on a 0-d array.")
+        CONVENTIONS.partial(credit, "array-for-scalar",
+                            f"{call} returned {describe(got)} for a scalar t; return a scalar "
+                            "(a float) when t is a scalar, e.g. with float(...) or result[()] "
+                            "on a 0-d array.")
     raise CheckFailure(f"{call} should return one number for a scalar t; got {describe(got)}.")
 
 
@@ -361,35 +350,26 @@ class Curve(NamedTuple):
     fn: Callable[[np.ndarray], np.ndarray]
 
 
-def pick_figure(value: Any, drawn: list[Any], *, call: str) -> tuple[dict, str]:
-    """The figure data to grade, and a note if it was not returned."""
-    if isinstance(value, dict) and isinstance(value.get("axes"), list):
-        return value, ""
-    figures = [f for f in drawn if isinstance(f, dict) and isinstance(f.get("axes"), list)]
-    if figures:
-        return figures[-1], (f"{call} returned {describe(value)}, not the Figure; it drew one, "
-                             "so I graded that, but end plot_runge with `return fig`.")
-    raise CheckFailure(f"{call} should return a matplotlib Figure (fig, ax = plt.subplots(); "
-                       f"...; return fig); got {describe(value)} and no figure was drawn.")
+def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[FigureData, str, str]:
+    """Call ``plot_runge(n)``; return (figure data, note, call text), the picture attached.
 
-
-def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[dict, str, str]:
-    """Call ``plot_runge(n)``; return (figure data, note, call text), the picture attached."""
+    The note is "" when the figure was returned, and says so when it was only drawn.
+    """
     call = f"plot_runge({n})"
-    value, drawn = student.call("plot_runge", n, figures=True)
-    figure, note = pick_figure(value, drawn, call=call)
-    png = png_bytes(figure)
-    if png:
-        feedback.image("your plot", png)
-    return figure, note, call
+    value, figure = call_for_figure(student, "plot_runge", n, feedback=feedback)
+    if figure is None:
+        raise CheckFailure(f"{call} should return a matplotlib Figure (fig, ax = "
+                           f"plt.subplots(); ...; return fig); got {describe(value)} and no "
+                           "figure was drawn.")
+    if figure is value:
+        return figure, "", call
+    return figure, (f"{call} returned {describe(value)}, not the Figure; it drew one, so I "
+                    "graded that, but end plot_runge with `return fig`."), call
 
 
-png_bytes = figure_png
-
-
-def drawn_curves(figure: Mapping[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
+def drawn_curves(figure: FigureData) -> list[tuple[np.ndarray, np.ndarray]]:
     """(x, y) of every line or point set with at least ``MIN_CURVE_POINTS`` finite points."""
-    pieces = []
+    pieces: list[tuple[object, object]] = []
     for axes in figure.get("axes", []) or []:
         for line in axes.get("lines", []) or []:
             pieces.append((line.get("x", []), line.get("y", [])))
@@ -411,7 +391,8 @@ def drawn_curves(figure: Mapping[str, Any]) -> list[tuple[np.ndarray, np.ndarray
     return curves
 
 
-def curve_error(curve: tuple[np.ndarray, np.ndarray], fn: Callable) -> tuple[float, float]:
+def curve_error(curve: tuple[np.ndarray, np.ndarray],
+                fn: Callable[[np.ndarray], ArrayLike]) -> tuple[float, float]:
     """Largest error of a drawn curve against ``fn``, relative to max(1, max |fn|); and where."""
     x, y = curve
     want = np.asarray(fn(x), dtype=float)
@@ -425,7 +406,7 @@ def _count(k: int) -> str:
     return f"your {k} curve" + ("" if k == 1 else "s")
 
 
-def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[Curve],
+def judge_runge_plot(figure: FigureData, *, call: str, wanted: Sequence[Curve],
                      nearby: Mapping[str, Sequence[Curve]] | None = None, credit: Credit,
                      note: str = "") -> None:
     """Find each wanted curve among the drawn ones (by values, not labels or colours).
@@ -436,7 +417,9 @@ def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[C
     sharpen the message.
     """
     curves = drawn_curves(figure)
-    share, score, parts, found = 1.0 / len(wanted), 0.0, [], []
+    share, score = 1.0 / len(wanted), 0.0
+    parts: list[str] = []
+    found: list[str] = []
     for curve in wanted:
         errors = [curve_error(c, curve.fn) for c in curves]
         best = int(np.argmin([e for e, _ in errors])) if errors else -1
@@ -452,19 +435,20 @@ def judge_runge_plot(figure: Mapping[str, Any], *, call: str, wanted: Sequence[C
             continue
         parts.append(_missing(curve, curves, errors, best, (nearby or {}).get(curve.name, ())))
     if note:
-        score *= FRACTIONS["no-return"]
+        score *= CONVENTIONS.fractions["no-return"]
         parts.append(note)
     if score >= 1.0 - 1e-12:
         return
     if found and len(found) < len(wanted):
         parts.insert(0, "I found " + " and ".join(found))
-    message = _sentence(parts)
+    message = sentences(parts)
     if score <= 0.0:
         raise CheckFailure(message)
     credit.partial(score, message)
 
 
-def _missing(curve: Curve, curves: list, errors: list, best: int, nearby: Sequence[Curve]) -> str:
+def _missing(curve: Curve, curves: list[tuple[np.ndarray, np.ndarray]],
+             errors: list[tuple[float, float]], best: int, nearby: Sequence[Curve]) -> str:
     if not curves:
         return (f"I could not find {curve.name}: your figure has no curve (a line through at "
                 f"least {MIN_CURVE_POINTS} points)")

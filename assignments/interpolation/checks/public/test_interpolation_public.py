@@ -14,28 +14,32 @@ from __future__ import annotations
 
 import math
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
-
+from numpy.typing import ArrayLike
 
 import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Feedback, Student
 
 
-def runge(x):
+def runge(x: ArrayLike) -> np.ndarray:
     return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
 
 
-def cheb2(n):
+def cheb2(n: int) -> np.ndarray:
     """Chebyshev points of the second kind, ascending."""
     return -np.cos(np.pi * np.arange(n + 1) / n)
 
 
-def cheb1(n):
+def cheb1(n: int) -> np.ndarray:
     """Chebyshev points of the first kind (a common mix-up), ascending."""
     return -np.cos((2 * np.arange(n + 1) + 1) * np.pi / (2 * n + 2))
 
 
-def fitted(nodes, f=runge):
+def fitted(nodes: ArrayLike,
+           f: Callable[[ArrayLike], np.ndarray] = runge) -> np.polynomial.Polynomial:
     """The polynomial through (nodes, f(nodes)), by an exact least-squares fit."""
     nodes = np.asarray(nodes, dtype=float)
     return np.polynomial.Polynomial.fit(nodes, f(nodes), deg=nodes.size - 1)
@@ -59,13 +63,13 @@ CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equi
                             "need w_j = (-1)^j C(n, j).")
 
 
-def _equispaced_ratios(n):
+def _equispaced_ratios(n: int) -> np.ndarray:
     """(-1)^j C(n, j) / C(n, n // 2), each correctly rounded (exact integers divided)."""
     top = math.comb(n, n // 2)
     return np.array([(-1) ** j * (math.comb(n, j) / top) for j in range(n + 1)])
 
 
-def _alternating(n):
+def _alternating(n: int) -> np.ndarray:
     return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
 
 
@@ -82,7 +86,7 @@ WEIGHTS = {
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("case", list(NODES))
-def test_nodes_small(student, credit, case):
+def test_nodes_small(student: Student, credit: Credit, case: str) -> None:
     name, n, expected, known = NODES[case]
     got = getattr(student, name)(n)
     fb.judge_nodes(got, np.asarray(expected), call=f"{name}({n})",
@@ -92,7 +96,7 @@ def test_nodes_small(student, credit, case):
 
 @pytest.mark.points(1)
 @pytest.mark.parametrize("case", list(WEIGHTS))
-def test_weights_small(student, case):
+def test_weights_small(student: Student, case: str) -> None:
     name, n, expected, hint, known = WEIGHTS[case]
     call = f"{name}({n})"
     got = fb.call_weights(getattr(student, name), n, call=call, hint=hint)
@@ -100,7 +104,7 @@ def test_weights_small(student, case):
 
 
 @pytest.mark.points(1)
-def test_interp_x_squared(student, credit):
+def test_interp_x_squared(student: Student, credit: Credit) -> None:
     """Three nodes reproduce x^2 exactly; weights 1/2, -1, 1/2."""
     x, w = np.array([-1.0, 0.0, 1.0]), np.array([0.5, -1.0, 0.5])
     t = np.array([-0.5, 0.25, 0.5, 0.9])
@@ -110,7 +114,7 @@ def test_interp_x_squared(student, credit):
 
 
 @pytest.mark.points(1)
-def test_interp_runge_chebyshev_10(student, credit):
+def test_interp_runge_chebyshev_10(student: Student, credit: Credit) -> None:
     """Runge's function in 11 Chebyshev points, on a grid that includes the end nodes."""
     x = cheb2(10)
     w = np.where(np.arange(11) % 2 == 0, 1.0, -1.0)
@@ -123,7 +127,7 @@ def test_interp_runge_chebyshev_10(student, credit):
 
 
 @pytest.mark.points(1)
-def test_interp_scalar(student, credit):
+def test_interp_scalar(student: Student, credit: Credit) -> None:
     x, w = np.array([-1.0, 0.0, 1.0]), np.array([0.5, -1.0, 0.5])
     call = "lagrange_interp(x**2, [-1, 0, 1], [0.5, -1, 0.5], 0.3)"
     value = fb.judge_scalar(student.lagrange_interp(x**2, x, w, 0.3), call=call, credit=credit)
@@ -132,7 +136,7 @@ def test_interp_scalar(student, credit):
 
 
 @pytest.mark.points(1)
-def test_interp_exact_at_nodes(student):
+def test_interp_exact_at_nodes(student: Student) -> None:
     """At the nodes the answer is the data itself, bit for bit (the lecture's weights)."""
     x = np.linspace(-1.0, 1.0, 5)
     f, w = runge(x), np.array([1.0, -4.0, 6.0, -4.0, 1.0])
@@ -145,7 +149,7 @@ def test_interp_exact_at_nodes(student):
 
 
 @pytest.mark.points(2)
-def test_plot_runge_10(student, credit, feedback):
+def test_plot_runge_10(student: Student, credit: Credit, feedback: Feedback) -> None:
     n = 10
     figure, note, call = fb.draw_runge_plot(student, feedback, n)
     equispaced, chebyshev = np.linspace(-1.0, 1.0, n + 1), cheb2(n)

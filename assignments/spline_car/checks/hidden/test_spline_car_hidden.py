@@ -14,17 +14,25 @@ fixture: a regrade draws the same inputs, another submission draws others.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
-from autograder.compare import CheckFailure, describe
+import spline_feedback as judge  # checks/public/spline_feedback.py: on sys.path while checks run
+from autograder.checks import (
+    CheckFailure,
+    Credit,
+    Dataset,
+    Feedback,
+    Student,
+    describe,
+    over_datasets,
+)
 from reference import CubicSpline, car
 
-
-import spline_feedback as judge  # checks/public/spline_feedback.py: on sys.path while checks run
+#: knots x and values y
+Data = tuple[np.ndarray, np.ndarray]
 
 
 def expected_rows(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -44,109 +52,107 @@ def evaluate(rows: np.ndarray, x: np.ndarray, t: np.ndarray) -> np.ndarray:
 # point sets
 # ---------------------------------------------------------------------------
 
-def _line_2pts(rng):
+def _line_2pts(rng: np.random.Generator) -> Data:
     return np.array([-1.5, 2.5]), np.array([3.0, -1.0])
 
 
-def _parabola_5(rng):
+def _parabola_5(rng: np.random.Generator) -> Data:
     x = np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
     return x, x**2 + 1.0
 
 
-def _random_12(rng):
+def _random_12(rng: np.random.Generator) -> Data:
     g = np.random.default_rng(12)
     return np.cumsum(g.uniform(0.2, 1.5, 12)), g.normal(0.0, 2.0, 12)
 
 
-def _uneven_spacing(rng):
+def _uneven_spacing(rng: np.random.Generator) -> Data:
     """Gaps from 0.001 to 1 side by side: any formula that assumes equal gaps fails."""
     g = np.random.default_rng(7)
     x = np.concatenate([[0.0], np.cumsum(10.0 ** g.uniform(-3.0, 0.0, 15))])
     return x, np.sin(3.0 * x) + 0.3 * g.normal(size=x.size)
 
 
-def _large_500(rng):
+def _large_500(rng: np.random.Generator) -> Data:
     g = np.random.default_rng(500)
     x = np.cumsum(g.uniform(0.05, 0.5, 500))
     return x, np.sin(x) + 0.1 * g.normal(size=500)
 
 
-def _runge_15(rng):
+def _runge_15(rng: np.random.Generator) -> Data:
     x = np.linspace(-1.0, 1.0, 15)
     return x, 1.0 / (1.0 + 25.0 * x**2)
 
 
-def _far_from_origin(rng):
+def _far_from_origin(rng: np.random.Generator) -> Data:
     """Knots near 1000: coefficients must be local, in powers of (t - x_i), not of t."""
     g = np.random.default_rng(1000)
     x = 1000.0 + np.cumsum(g.uniform(0.5, 1.5, 9))
     return x, g.normal(size=9)
 
 
-def _unseen_random(rng):
+def _unseen_random(rng: np.random.Generator) -> Data:
     n = int(rng.integers(6, 41))
     x = rng.uniform(-10.0, 10.0) + np.cumsum(rng.uniform(0.1, 2.0, n))
     return x, rng.normal(0.0, rng.uniform(0.5, 5.0), n)
 
 
-@dataclass(frozen=True)
-class PointSet:
-    build: Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray]]
-    weight: int
-    rtol: float  # relative to |expected| + the largest |expected| in the column
-    reason: str
-
-
 WELL_SPACED = ("gaps of similar size: the system for M is strictly diagonally dominant "
                "(condition number below 3), so correct methods agree to ~1e-14")
 
-DATASETS = {
-    "line-2pts": PointSet(_line_2pts, 1, 1e-9, "no system to solve: exact up to rounding"),
-    "parabola-5": PointSet(_parabola_5, 1, 1e-9, WELL_SPACED),
-    "random-12": PointSet(_random_12, 2, 1e-9, WELL_SPACED),
-    "uneven-spacing": PointSet(_uneven_spacing, 2, 1e-7,
-                               "gaps from 1e-3 to 1: d = (M_(i+1) - M_i) / (6 h_i) divides "
-                               "rounding errors by small h_i; correct methods agree to ~1e-12"),
-    "large-500": PointSet(_large_500, 2, 1e-8,
-                          "500 unknowns: rounding accumulates along the elimination, still "
-                          "well conditioned; correct methods agree to ~1e-13"),
-    "runge-15": PointSet(_runge_15, 1, 1e-9, WELL_SPACED),
-    "far-from-origin": PointSet(_far_from_origin, 1, 1e-8,
-                                "h_i = x_(i+1) - x_i loses 3 digits next to 1000"),
-    "unseen-random": PointSet(_unseen_random, 2, 1e-8, WELL_SPACED),
+#: tolerances are relative to |expected| + the largest |expected| in the column
+DATASETS: dict[str, Dataset[Data]] = {
+    "line-2pts": Dataset(_line_2pts, tolerance=1e-9,
+                         reason="no system to solve: exact up to rounding"),
+    "parabola-5": Dataset(_parabola_5, tolerance=1e-9, reason=WELL_SPACED),
+    "random-12": Dataset(_random_12, points=2, tolerance=1e-9, reason=WELL_SPACED),
+    "uneven-spacing": Dataset(_uneven_spacing, points=2, tolerance=1e-7,
+                              reason="gaps from 1e-3 to 1: d = (M_(i+1) - M_i) / (6 h_i) "
+                                     "divides rounding errors by small h_i; correct methods "
+                                     "agree to ~1e-12"),
+    "large-500": Dataset(_large_500, points=2, tolerance=1e-8,
+                         reason="500 unknowns: rounding accumulates along the elimination, "
+                                "still well conditioned; correct methods agree to ~1e-13"),
+    "runge-15": Dataset(_runge_15, tolerance=1e-9, reason=WELL_SPACED),
+    "far-from-origin": Dataset(_far_from_origin, tolerance=1e-8,
+                               reason="h_i = x_(i+1) - x_i loses 3 digits next to 1000"),
+    "unseen-random": Dataset(_unseen_random, points=2, tolerance=1e-8, reason=WELL_SPACED),
 }
 
 
-def _params(names, weight=None):
-    return [pytest.param(n, marks=pytest.mark.points(weight or DATASETS[n].weight))
-            for n in names]
+def _rtol(name: str) -> float:
+    tolerance = DATASETS[name].tolerance
+    assert tolerance is not None, f"dataset {name} has no tolerance"
+    return tolerance
 
 
-@pytest.mark.parametrize("name", _params(DATASETS))
-def test_spline_coefficients(student, credit, rng, name):
-    dataset = DATASETS[name]
-    x, y = dataset.build(rng)
+@over_datasets(DATASETS)
+def test_spline_coefficients(student: Student, credit: Credit, rng: np.random.Generator,
+                             name: str) -> None:
+    x, y = DATASETS[name].build(rng)
     got = student.spline_coefficients(x, y)
-    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=dataset.rtol)
+    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=_rtol(name))
 
 
-@pytest.mark.parametrize("name", _params(["random-12", "unseen-random"], weight=1))
-def test_natural_ends(student, credit, rng, name):
-    dataset = DATASETS[name]
-    x, y = dataset.build(rng)
+def _check_property(student: Student, credit: Credit, rng: np.random.Generator, name: str,
+                    check: Callable[[judge.Reading, np.ndarray, np.ndarray, float], None]) -> None:
+    """One property of the student's spline of a point set, read from its coefficients."""
+    x, y = DATASETS[name].build(rng)
     reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
-    judge.check_natural_ends(reading, x, y, dataset.rtol)
+    check(reading, x, y, _rtol(name))
     judge.finish(reading, credit)
 
 
-@pytest.mark.parametrize("name", _params(["random-12", "uneven-spacing", "unseen-random"],
-                                         weight=1))
-def test_continuity(student, credit, rng, name):
-    dataset = DATASETS[name]
-    x, y = dataset.build(rng)
-    reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
-    judge.check_continuity(reading, x, y, dataset.rtol)
-    judge.finish(reading, credit)
+@over_datasets(DATASETS, only=["random-12", "unseen-random"], points=1)
+def test_natural_ends(student: Student, credit: Credit, rng: np.random.Generator,
+                      name: str) -> None:
+    _check_property(student, credit, rng, name, judge.check_natural_ends)
+
+
+@over_datasets(DATASETS, only=["random-12", "uneven-spacing", "unseen-random"], points=1)
+def test_continuity(student: Student, credit: Credit, rng: np.random.Generator,
+                    name: str) -> None:
+    _check_property(student, credit, rng, name, judge.check_continuity)
 
 
 # ---------------------------------------------------------------------------
@@ -154,7 +160,8 @@ def test_continuity(student, credit, rng, name):
 # ---------------------------------------------------------------------------
 
 #: name -> (f, a, b): smooth functions whose f'' is not zero at the ends
-FUNCTIONS = {"sin": (np.sin, 0.0, 3.0), "exp": (np.exp, -1.0, 1.0)}
+FUNCTIONS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], float, float]] = {
+    "sin": (np.sin, 0.0, 3.0), "exp": (np.exp, -1.0, 1.0)}
 #: Intervals of the coarse grid; the fine grid has twice as many (its knots nest).
 COARSE = 32
 #: The error is measured on the middle half: near the ends a natural spline is only
@@ -169,18 +176,20 @@ WHOLE_ORDER = 1.5
 FINE_ERROR = 1e-4
 
 
-def _spline_of(student, f, a, b, intervals):
+def _spline_of(student: Student, f: Callable[[np.ndarray], np.ndarray], a: float, b: float,
+               intervals: int) -> tuple[np.ndarray, judge.Reading]:
     """The knots and the student's coefficients for f at ``intervals + 1`` equal steps."""
     x = np.linspace(a, b, intervals + 1)
     return x, judge.read_coefficients(student.spline_coefficients(x, f(x)), x, f(x))
 
 
-def _max_error(f, x, reading, margin):
+def _max_error(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, reading: judge.Reading,
+               margin: float) -> float:
     t = np.linspace(x[0] + margin, x[-1] - margin, 20 * (len(x) - 1) + 1)
     return float(np.max(np.abs(evaluate(reading.rows, x, t) - f(t))))
 
 
-def _order(coarse, fine):
+def _order(coarse: float, fine: float) -> float:
     if fine == 0.0:
         return math.inf
     return math.log2(coarse / fine) if coarse > 0 else -math.inf
@@ -191,7 +200,8 @@ def _order(coarse, fine):
 LINEAR_LIKENESS = 0.1
 
 
-def _looks_like(f, x, reading, margin, order) -> str:
+def _looks_like(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, reading: judge.Reading,
+                margin: float, order: float) -> str:
     """A hint naming what the spline resembles, only when that is measured in its values."""
     t = np.linspace(x[0] + margin, x[-1] - margin, 20 * (len(x) - 1) + 1)
     mine = evaluate(reading.rows, x, t)
@@ -206,7 +216,7 @@ def _looks_like(f, x, reading, margin, order) -> str:
 
 @pytest.mark.points(2)
 @pytest.mark.parametrize("name", list(FUNCTIONS))
-def test_convergence(student, credit, name):
+def test_convergence(student: Student, credit: Credit, name: str) -> None:
     f, a, b = FUNCTIONS[name]
     margin = INTERIOR * (b - a)
     x_coarse, coarse = _spline_of(student, f, a, b, COARSE)
@@ -245,22 +255,22 @@ def test_convergence(student, credit, name):
 # spline_eval, with the reference coefficients
 # ---------------------------------------------------------------------------
 
-def _knots(x, rng):
+def _knots(x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return x.copy()
 
 
-def _between(x, rng):
+def _between(x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     mid = 0.5 * (x[:-1] + x[1:])
     inside = np.random.default_rng(3).uniform(x[0], x[-1], 40)
     return np.concatenate([mid, inside])
 
 
-def _outside(x, rng):
+def _outside(x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     span = x[-1] - x[0]
     return np.array([x[0] - 0.3 * span, x[0] - 0.01, x[-1] + 0.01, x[-1] + 0.2 * span])
 
 
-def _unseen_unsorted(x, rng):
+def _unseen_unsorted(x: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Random points in random order, a few outside: t need not be sorted."""
     span = x[-1] - x[0]
     return rng.permutation(np.concatenate([rng.uniform(x[0], x[-1], 60),
@@ -268,32 +278,46 @@ def _unseen_unsorted(x, rng):
                                            rng.uniform(x[-1], x[-1] + 0.1 * span, 2)]))
 
 
-#: name -> (points t from the knots x, data set, weight)
-EVAL_SETS = {
-    "knots": (_knots, "random-12", 1),
-    "between": (_between, "uneven-spacing", 2),
-    "outside": (_outside, "random-12", 1),
-    "unseen-unsorted": (_unseen_unsorted, "unseen-random", 1),
-}
 #: One Horner evaluation per point: rounding only. Relative to |value| + max |value|.
 EVAL_RTOL = 1e-12
+EVAL_REASON = "one Horner evaluation per point: rounding only"
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(w))
-                                  for n, (_, _, w) in EVAL_SETS.items()])
-def test_spline_eval(student, credit, rng, name):
-    make_t, data, _ = EVAL_SETS[name]
-    x, y = DATASETS[data].build(rng)
+def _points_on(data: str, make_t: Callable[[np.ndarray, np.random.Generator], np.ndarray]
+               ) -> Callable[[np.random.Generator], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Knots x and values y of the point set ``data``, and the points t made from the knots."""
+    def build(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        x, y = DATASETS[data].build(rng)
+        return x, y, make_t(x, rng)
+    return build
+
+
+#: name -> (x, y, t): knots and values of a point set, and the points t
+EVAL_SETS: dict[str, Dataset[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {
+    "knots": Dataset(_points_on("random-12", _knots), tolerance=EVAL_RTOL, reason=EVAL_REASON),
+    "between": Dataset(_points_on("uneven-spacing", _between), points=2, tolerance=EVAL_RTOL,
+                       reason=EVAL_REASON),
+    "outside": Dataset(_points_on("random-12", _outside), tolerance=EVAL_RTOL,
+                       reason=EVAL_REASON),
+    "unseen-unsorted": Dataset(_points_on("unseen-random", _unseen_unsorted),
+                               tolerance=EVAL_RTOL, reason=EVAL_REASON),
+}
+
+
+@over_datasets(EVAL_SETS)
+def test_spline_eval(student: Student, credit: Credit, rng: np.random.Generator,
+                     name: str) -> None:
+    x, y, t = EVAL_SETS[name].build(rng)
     rows = expected_rows(x, y)
-    t = make_t(x, rng)
     got = student.spline_eval(x, rows, t)
     judge.grade_eval(got, x, t, evaluate(rows, x, t), rtol=EVAL_RTOL, credit=credit,
                      retry_reversed=lambda: student.spline_eval(x, rows[:, ::-1].copy(), t))
 
 
 @pytest.mark.points(1)
-def test_spline_eval_scalar(student, credit):
-    x, y = DATASETS["random-12"].build(None)
+def test_spline_eval_scalar(student: Student, credit: Credit,
+                            rng: np.random.Generator) -> None:
+    x, y = DATASETS["random-12"].build(rng)  # fixed data: the rng is not used
     rows = expected_rows(x, y)
     t = float(0.5 * (x[4] + x[5]))
     got = student.spline_eval(x, rows, t)
@@ -310,7 +334,7 @@ def test_spline_eval_scalar(student, credit):
 # drawings of unseen shapes
 # ---------------------------------------------------------------------------
 
-def _thin_straights(points):
+def _thin_straights(points: np.ndarray) -> np.ndarray:
     """Drop the points in the middle of straight runs (collinear with both neighbours)."""
     keep = [0]
     for i in range(1, len(points) - 1):
@@ -321,7 +345,7 @@ def _thin_straights(points):
     return points[keep + [len(points) - 1]]
 
 
-def _unseen_car(rng):
+def _unseen_car(rng: np.random.Generator) -> list[np.ndarray]:
     """The car moved and scaled, a little shaken, with straight runs down to their two ends:
     long steps next to short ones, where the choice of parameter shows."""
     scale, shift = rng.uniform(0.5, 2.0), rng.uniform(-20.0, 20.0, 2)
@@ -336,7 +360,7 @@ def _unseen_car(rng):
     return strokes
 
 
-def _unseen_rounded_rectangle(rng):
+def _unseen_rounded_rectangle(rng: np.random.Generator) -> list[np.ndarray]:
     """A rectangle with round corners: five points per corner, none along the sides."""
     w, h = rng.uniform(4.0, 7.0), rng.uniform(1.5, 2.5)
     r, k = rng.uniform(0.2, 0.3) * h, 5
@@ -349,7 +373,7 @@ def _unseen_rounded_rectangle(rng):
     return [pts * rng.uniform(0.5, 3.0) + rng.uniform(-20.0, 20.0, 2)]
 
 
-def _unseen_letter_s(rng):
+def _unseen_letter_s(rng: np.random.Generator) -> list[np.ndarray]:
     """Two round ends, eight points each, joined by one long step: the parameter shows."""
     a1 = np.radians(np.linspace(0.0, 270.0, 8))
     a2 = np.radians(np.linspace(90.0, -180.0, 8))
@@ -360,19 +384,21 @@ def _unseen_letter_s(rng):
     return [pts @ rotation.T * rng.uniform(0.5, 3.0) + rng.uniform(-20.0, 20.0, 2)]
 
 
-#: name -> (strokes from rng, what the picture shows, weight); thresholds: see
-#: DRAWING_PASS and DRAWING_HALF in spline_feedback.py
-SHAPES = {
-    "unseen-car": (_unseen_car, "car", 2),
-    "unseen-rounded-rectangle": (_unseen_rounded_rectangle, "rounded rectangle", 2),
-    "unseen-letter-s": (_unseen_letter_s, "letter S", 2),
+#: name -> strokes; thresholds: DRAWING_PASS and DRAWING_HALF in spline_feedback.py
+SHAPES: dict[str, Dataset[list[np.ndarray]]] = {
+    "unseen-car": Dataset(_unseen_car, points=2),
+    "unseen-rounded-rectangle": Dataset(_unseen_rounded_rectangle, points=2),
+    "unseen-letter-s": Dataset(_unseen_letter_s, points=2),
 }
+#: what each picture shows, for messages
+SHAPE_NAMES = {"unseen-car": "car", "unseen-rounded-rectangle": "rounded rectangle",
+               "unseen-letter-s": "letter S"}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.points(w))
-                                  for n, (_, _, w) in SHAPES.items()])
-def test_draw_car_unseen(student, credit, feedback, rng, name):
-    build, what, _ = SHAPES[name]
-    strokes = build(rng)
+@over_datasets(SHAPES)
+def test_draw_car_unseen(student: Student, credit: Credit, feedback: Feedback,
+                         rng: np.random.Generator, name: str) -> None:
+    strokes = SHAPES[name].build(rng)
     fig = student.draw_car(strokes)
-    judge.grade_drawing(fig, strokes, credit, feedback, what=what, picture_shown=False)
+    judge.grade_drawing(fig, strokes, credit, feedback, what=SHAPE_NAMES[name],
+                        picture_shown=False)

@@ -18,30 +18,41 @@ part of a student's install, so released helpers never import it).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-
 from scipy.interpolate import CubicSpline
 
 from autograder.checks import (
     CheckFailure,
+    Conventions,
     Credit,
     Feedback,
+    FigureData,
     describe,
     expect_array,
-    sentence,
+    is_figure,
     show_number,
     side_by_side,
 )
 from autograder.curves import CurveDistance, curve_points, hausdorff, relative_curve_distance
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
 NAME = "spline_coefficients(x, y)"
 
-#: Fraction of a check's points kept when the spline is right but laid out in
-#: another convention: the mathematics is done, the interface is not.
-CONVENTION_FRACTION = 0.5
+#: Fraction of a check's points kept when the spline is right but a convention is
+#: not: the mathematics is done, the interface is not.
+CONVENTIONS = Conventions({
+    "layout": 0.5,       # coefficients in SciPy's order, or transposed
+    "eval-order": 0.5,   # spline_eval reads each row as [d, c, b, a]
+    "aspect": 0.75,      # a right drawing whose axes do not have equal aspect
+})
+#: Significant digits of the numbers in messages (never rounded into an integer they are not).
+DIGITS = 4
 
 SCIPY_ROWS = ("your coefficients are right but in SciPy's order [d, c, b, a]; "
               "the assignment asks for [a, b, c, d]")
@@ -58,16 +69,9 @@ TRANSPOSED = ("your coefficients are right but transposed: shape (4, n-1) instea
 #: car's diagonal (0.2 units) is where a difference starts to be visible.
 DRAWING_PASS = 0.02
 DRAWING_HALF = 0.08
-#: Fraction kept for a right drawing whose axes do not have equal aspect.
-ASPECT_FRACTION = 0.75
 #: Points per stroke sampled along the reference drawing (dense: the sampling
 #: gap must stay far below DRAWING_PASS).
 REFERENCE_SAMPLES = 2000
-
-
-def num(value: float) -> str:
-    """A number for a message: short, but never rounded into an integer it is not."""
-    return show_number(value, digits=4)
 
 
 # ---------------------------------------------------------------------------
@@ -82,7 +86,7 @@ class Reading:
     convention: str | None = None
 
 
-def read_coefficients(got: Any, x: np.ndarray, y: np.ndarray, *, name: str = NAME) -> Reading:
+def read_coefficients(got: object, x: np.ndarray, y: np.ndarray, *, name: str = NAME) -> Reading:
     """Interpret ``got`` as ``(n-1, 4)`` rows [a, b, c, d], recognising SciPy's layouts.
 
     Among the layouts that fit the shape, the one whose ``a`` column equals
@@ -127,7 +131,7 @@ def _shape_message(shape: tuple[int, ...], pieces: int, name: str) -> str:
 def finish(reading: Reading, credit: Credit) -> None:
     """End a check whose mathematics passed: full points, or part for a broken convention."""
     if reading.convention is not None:
-        credit.partial(CONVENTION_FRACTION, sentence(reading.convention))
+        CONVENTIONS.partial(credit, "layout", reading.convention)
 
 
 def _with_convention(message: str, reading: Reading) -> str:
@@ -171,15 +175,17 @@ def check_passes_through(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: f
         i = int(np.argmax(start_err - tol[:-1]))
         raise CheckFailure(_with_convention(
             f"Your spline does not pass through the data: piece {i} (on [x[{i}], x[{i + 1}]]) "
-            f"starts at S({num(x[i])}) = a = {num(left[0, i])}, but y[{i}] = {num(y[i])}. "
+            f"starts at S({show_number(x[i], DIGITS)}) = a = "
+            f"{show_number(left[0, i], DIGITS)}, but y[{i}] = {show_number(y[i], DIGITS)}. "
             f"Row i must start with a = y[i].", reading))
     end_err = np.abs(right[0] - y[1:])
     if np.any(end_err > tol[1:]):
         i = int(np.argmax(end_err - tol[1:]))
         raise CheckFailure(_with_convention(
             f"Your spline does not pass through the data: piece {i} ends at "
-            f"S({num(x[i + 1])}) = a + b h + c h^2 + d h^3 = {num(right[0, i])} "
-            f"(h = x[{i + 1}] - x[{i}]), but y[{i + 1}] = {num(y[i + 1])}. Check b "
+            f"S({show_number(x[i + 1], DIGITS)}) = a + b h + c h^2 + d h^3 = "
+            f"{show_number(right[0, i], DIGITS)} (h = x[{i + 1}] - x[{i}]), but "
+            f"y[{i + 1}] = {show_number(y[i + 1], DIGITS)}. Check b "
             "(it depends on the slope (y[i+1] - y[i]) / h[i] and on M) and d.", reading))
 
 
@@ -205,9 +211,10 @@ def check_continuity(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: float
             j = int(np.argmax(jump / tol)) + 1
             symbol, words = _DERIVATIVE[k]
             raise CheckFailure(_with_convention(
-                f"The {words} of your spline jumps at the interior knot x[{j}] = {num(x[j])}: "
-                f"the piece on its left ends with {symbol} = {num(right[k, j - 1])}, the piece "
-                f"on its right starts with {symbol} = {num(left[k, j])}. A cubic spline has "
+                f"The {words} of your spline jumps at the interior knot x[{j}] = "
+                f"{show_number(x[j], DIGITS)}: the piece on its left ends with {symbol} = "
+                f"{show_number(right[k, j - 1], DIGITS)}, the piece on its right starts with "
+                f"{symbol} = {show_number(left[k, j], DIGITS)}. A cubic spline has "
                 f"continuous S, S' and S'' at every interior knot.{_JUMP_HINT[k]}", reading))
 
 
@@ -244,7 +251,7 @@ def check_values(reading: Reading, expected: np.ndarray, rtol: float) -> None:
             "outside the tolerance.", reading))
 
 
-def grade_coefficients(got: Any, x: np.ndarray, y: np.ndarray, expected: np.ndarray,
+def grade_coefficients(got: object, x: np.ndarray, y: np.ndarray, expected: np.ndarray,
                        credit: Credit, *, rtol: float) -> None:
     """All stages: layout, passes through the points, C2, natural ends, values."""
     reading = read_coefficients(got, x, y)
@@ -272,9 +279,9 @@ def where_is(t: float, x: np.ndarray) -> str:
     return f"between x[{i}] and x[{i + 1}] (piece {i})"
 
 
-def grade_eval(got: Any, x: np.ndarray, t: np.ndarray, expected: np.ndarray, *,
-               rtol: float, retry_reversed: Callable[[], Any] | None = None,
-               credit: Credit = None) -> None:
+def grade_eval(got: object, x: np.ndarray, t: np.ndarray, expected: np.ndarray, *,
+               rtol: float, credit: Credit,
+               retry_reversed: Callable[[], object] | None = None) -> None:
     """Compare ``spline_eval`` values with the expected ones, saying where they differ.
 
     If they differ and ``retry_reversed`` is given, it is called (it should
@@ -296,13 +303,14 @@ def grade_eval(got: Any, x: np.ndarray, t: np.ndarray, expected: np.ndarray, *,
     if retry_reversed is not None:
         again = np.asarray(retry_reversed(), dtype=float)
         if again.shape == want.shape and np.all(np.abs(again - want) <= bound):
-            credit.partial(CONVENTION_FRACTION,
-                           "Your spline_eval reads each row of coeffs as [d, c, b, a] (SciPy's "
-                           "order); the assignment's rows are [a, b, c, d], with "
-                           "S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + d (t - x_i)^3.")
+            CONVENTIONS.partial(credit, "eval-order",
+                                "Your spline_eval reads each row of coeffs as [d, c, b, a] "
+                                "(SciPy's order); the assignment's rows are [a, b, c, d], with "
+                                "S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + d (t - x_i)^3.")
     k = int(np.argmax(err - bound))
     raise CheckFailure(
-        f"{name} at t = {num(t.flat[k])}, {where_is(float(t.flat[k]), x)}, should be "
+        f"{name} at t = {show_number(t.flat[k], DIGITS)}, {where_is(float(t.flat[k]), x)}, "
+        "should be "
         f"{want.flat[k]:.10g}; got {arr.flat[k]:.10g}. {int((err > bound).sum())} of "
         f"{err.size} values are off. Find the piece i with x[i] <= t < x[i+1] and evaluate "
         "a + b u + c u^2 + d u^3 with u = t - x[i] (not t).")
@@ -338,16 +346,16 @@ def stroke_spline(stroke: np.ndarray, *, parametrization: str = "chord",
 def sample_strokes(strokes: Sequence[np.ndarray], num: int = REFERENCE_SAMPLES,
                    **options: str) -> np.ndarray:
     """``num`` points along each stroke's spline (see :func:`stroke_spline`), stacked."""
-    parts = []
+    parts: list[np.ndarray] = []
     for stroke in strokes:
         spline = stroke_spline(stroke, **options)
         parts.append(spline(np.linspace(spline.x[0], spline.x[-1], num)))
     return np.concatenate(parts)
 
 
-def draw_reference(strokes: Sequence[np.ndarray]) -> Callable[[Any], object]:
+def draw_reference(strokes: Sequence[np.ndarray]) -> Callable[[Axes], None]:
     """A function that draws the reference car (or shape) on a matplotlib ``Axes``."""
-    def draw(ax: Any) -> None:
+    def draw(ax: Axes) -> None:
         for stroke in strokes:
             curve = sample_strokes([stroke], 200)
             ax.plot(curve[:, 0], curve[:, 1], "-", color="k", linewidth=2,
@@ -394,7 +402,7 @@ def _gap_message(dist: CurveDistance, what: str) -> str:
     return "; ".join(parts)
 
 
-def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Credit, feedback: Feedback,
+def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, feedback: Feedback,
                   *, what: str = "car", name: str = "draw_car(strokes)",
                   picture_shown: bool = True) -> None:
     """Judge a drawing of ``strokes`` and attach it beside the reference.
@@ -407,9 +415,9 @@ def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Credit, feedb
     """
     strokes = [np.asarray(s, dtype=float) for s in strokes]
     feedback.image(f"your {what} beside the reference", side_by_side(
-        fig if isinstance(fig, dict) else None, draw_reference(strokes),
+        fig if is_figure(fig) else None, draw_reference(strokes),
         title=f"{name}: your drawing (left) and the reference (right)"))
-    if not isinstance(fig, dict) or not isinstance(fig.get("axes"), list):
+    if not is_figure(fig):
         raise CheckFailure(f"{name} should return the matplotlib Figure it drew on "
                            "(fig, ax = plt.subplots() ... return fig); got "
                            f"{describe(fig)}.")
@@ -428,9 +436,9 @@ def grade_drawing(fig: Any, strokes: Sequence[np.ndarray], credit: Credit, feedb
         raise CheckFailure(message)
     if dist.worst <= DRAWING_PASS:
         if not any(ax.get("aspect") == "equal" for ax in fig["axes"] if isinstance(ax, dict)):
-            credit.partial(ASPECT_FRACTION,
-                           f"Your {what} is right, but the axes do not have equal aspect, so "
-                           "circles look like ellipses: call ax.set_aspect('equal').")
+            CONVENTIONS.partial(credit, "aspect",
+                                f"Your {what} is right, but the axes do not have equal aspect, "
+                                "so circles look like ellipses: call ax.set_aspect('equal').")
         return
     far = f"{dist.worst:.1%} of" if dist.worst < 1.0 else f"{dist.worst:.3g} times"
     message = (f"Your drawing is {far} the {what}'s size (the diagonal of its "
@@ -456,7 +464,7 @@ MISTAKE_FLOOR = DRAWING_PASS / 4
 MISTAKE_RATIO = 4.0
 
 
-def _known_mistake(fig: dict, strokes: Sequence[np.ndarray], reference: np.ndarray,
+def _known_mistake(fig: FigureData, strokes: Sequence[np.ndarray], reference: np.ndarray,
                    scale: float) -> str:
     """The hint of a penalised mistake (the point number as parameter) the drawing makes."""
     vertices = curve_points(fig, samples_per_segment=1)
