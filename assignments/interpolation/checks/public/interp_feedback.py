@@ -58,8 +58,9 @@ WEIGHT_ATOL = 1e-300
 #: double-precision evaluation is within 1e-12; a wrong degree or node family
 #: is off by more than 1e-2.
 CURVE_RTOL = 1e-6
-#: A drawn line counts as a curve from this many finite points on: node
-#: markers (n + 1 points) are not curves.
+#: A drawn line counts as a curve from this many finite points at distinct x on:
+#: node markers (n + 1 points) are not curves, and neither is a line through the
+#: nodes repeated (every interpolant equals f there, so it would match them all).
 MIN_CURVE_POINTS = 50
 #: A curve must reach this close to both ends of [-1, 1].
 CURVE_REACH = 0.95
@@ -368,7 +369,7 @@ def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[Figur
 
 
 def drawn_curves(figure: FigureData) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(x, y) of every line or point set with at least ``MIN_CURVE_POINTS`` finite points."""
+    """(x, y) of every line or point set with ``MIN_CURVE_POINTS`` finite points at distinct x."""
     pieces: list[tuple[object, object]] = []
     for axes in figure.get("axes", []) or []:
         for line in axes.get("lines", []) or []:
@@ -386,7 +387,7 @@ def drawn_curves(figure: FigureData) -> list[tuple[np.ndarray, np.ndarray]]:
             continue
         k = min(x.size, y.size)
         ok = np.isfinite(x[:k]) & np.isfinite(y[:k])
-        if ok.sum() >= MIN_CURVE_POINTS:
+        if np.unique(x[:k][ok]).size >= MIN_CURVE_POINTS:
             curves.append((x[:k][ok], y[:k][ok]))
     return curves
 
