@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import pytest
 
 from autograder.errors import UsageError
@@ -243,9 +244,24 @@ def test_syntax_error_is_recorded_and_other_cells_scanned() -> None:
 
 
 def test_very_deep_code_is_unverified_not_a_crash() -> None:
-    report = scan(["x = " + "+".join(["1"] * 3000), "y = f" + "()" * 3000], SPATIAL)
-    assert any("too deeply nested" in e for e in report.errors)
-    assert [u.name for u in report.dynamic] == ["<too deeply nested>"]
+    """Where Python's parser gives up differs between 3.11 releases: a cell it cannot
+    parse cannot run either; one it parses but the scan cannot walk is unverified."""
+    cells = ["x = " + "+".join(["1"] * 3000), "y = f" + "()" * 3000]
+    report = scan(cells, SPATIAL)
+    assert report.errors and all("too deeply nested" in e for e in report.errors), report.errors
+    flagged = {int(e.split(",")[0].removeprefix("cell ")) for e in report.errors}
+    assert 1 in flagged, "a call chain 3000 deep is too deep for the scan in every version"
+    assert all(u.name == "<too deeply nested>" for u in report.dynamic)
+    # parsed but not walked: unverified; not even parsed: it cannot run either
+    assert {u.cell for u in report.dynamic} == {c for c in flagged if _parses(cells[c])}
+
+
+def _parses(source: str) -> bool:
+    try:
+        ast.parse(source)
+    except RecursionError:
+        return False
+    return True
 
 
 def test_empty_inputs() -> None:
@@ -271,3 +287,33 @@ def test_report_is_frozen() -> None:
 def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
     with pytest.raises(UsageError):
         scan(["x = 1"], forbid)  # type: ignore[arg-type]
+
+
+# -- the parse of plain Python skips IPython's token passes, with the same tree --------
+
+@pytest.mark.parametrize("source", [
+    "import scipy.spatial as sp\nH = sp.ConvexHull",
+    "\n\n  x = 1\n  y = x % 2",            # blank first lines and common indentation
+    "In [1]: x = 1\n   ...: y = x",        # a pasted IPython prompt, which also parses as Python
+    ">>> x = 1\n... y = 2",
+    "x = (1\n% 2)\ny = 1 \\\n    % 2",     # a % at the start of a line inside an expression
+    "a = 'text?'  # comment?\nb = f'{a!r}'",
+    "%time x = 1", "!ls -l", "x = %pwd", "y = !echo hi", "len?", "/print 1 2", ",f a b",
+    "%%timeit -n 2\nx = 1", "def f():\n    %time g()\n    return 1",
+    "x = 1\n\tif x:\n  y",                  # not Python at all: the error comes from the full pass
+])
+def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> None:
+    import ast
+
+    from IPython.core.inputtransformer2 import TransformerManager
+
+    from autograder.staticscan import _Analyzer, _Where
+
+    analyzer = _Analyzer(tuple(SPATIAL))
+    mine = analyzer._parse(source, _Where(cell=0, lines=tuple(source.splitlines())), "")
+    try:
+        theirs: ast.Module | None = ast.parse(TransformerManager().transform_cell(source))
+    except SyntaxError:
+        theirs = None
+    assert (ast.dump(mine) if mine else None) == (ast.dump(theirs) if theirs else None)
+    assert (mine is None) == bool(analyzer.errors)
