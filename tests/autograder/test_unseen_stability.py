@@ -1,54 +1,62 @@
 """Unseen data that do not depend on luck (issue 8.4): one score per example, whatever the seed.
 
 Unseen inputs are drawn from the assignment and the student's id. Every shipped
-example is graded under several student ids (so several sets of unseen data)
-by one in-process :class:`~autograder.grading.Grader` per assignment, and must
-get the same score under every id: pass lines sit away from where plausible
-submissions fall (a uniform-parameter car fails the chord-length test clearly,
-a correct car passes clearly), whatever the data.
+example is graded under several student ids (so several sets of unseen data) in
+one batch per assignment, through the batch API with two jobs as an instructor
+grades (the id comes from the file's place: ``<student>/<example>.ipynb``), and
+must get the same score under every id: pass lines sit away from where plausible
+submissions fall (a uniform-parameter car fails the chord-length test clearly, a
+correct car passes clearly), whatever the data.
 """
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
 
+from autograder import api
 from autograder.assignment import load_assignment
-from autograder.grading import Grader, GradingOptions, submission_seed
+from autograder.grading import submission_seed
 
 ROOT = Path(__file__).resolve().parents[2]
 ASSIGNMENTS = sorted(p.parent.name for p in (ROOT / "assignments").glob("*/assignment.toml"))
-#: student ids: each gives other unseen data
-IDS = [f"student-{k}" for k in range(4)]
+#: student folders: each gives other unseen data
+STUDENTS = [f"student-{k}" for k in range(4)]
 
 pytestmark = pytest.mark.slow
 
 
-def test_the_ids_give_different_seeds() -> None:
-    """Otherwise the test below would grade the same data eight times."""
+def test_the_students_give_different_seeds() -> None:
+    """Otherwise the test below would grade the same data several times."""
     assignment = load_assignment("hull")
-    assert len({submission_seed(assignment, i) for i in IDS}) == len(IDS)
+    ids = [f"{s}-{e}" for s in STUDENTS for e in ("solution", "wrong-clockwise")]
+    assert len({submission_seed(assignment, i) for i in ids}) == len(ids)
 
 
 @pytest.mark.parametrize("name", ASSIGNMENTS)
-def test_each_example_gets_one_score_under_every_seed(name: str) -> None:
-    assignment = load_assignment(name)
+def test_each_example_gets_one_score_under_every_seed(tmp_path: Path, name: str) -> None:
     examples = sorted((ROOT / "assignments" / name / "examples").glob("*.ipynb"))
-    spread = []
-    with Grader(assignment, GradingOptions()) as grader:
+    for student in STUDENTS:
+        (tmp_path / "in" / student).mkdir(parents=True)
         for path in examples:
-            scores: dict[float, list[str]] = {}
-            details: dict[str, dict[str, float]] = {}
-            for sub_id in IDS:
-                result = grader.grade(path, id=sub_id)
-                assert result.outcome != "error", f"{name}/{path.stem} ({sub_id}): {result.output}"
-                scores.setdefault(round(result.score, 6), []).append(sub_id)
-                details[sub_id] = {t.name: t.score for t in result.tests}
-            if len(scores) > 1:
-                first = details[IDS[0]]
-                differ = sorted({check for d in details.values() for check, s in d.items()
-                                 if s != first.get(check)})
-                spread.append(f"{path.stem}: scores {sorted(scores)} (checks that differ: "
-                              f"{', '.join(differ)})")
+            shutil.copy(path, tmp_path / "in" / student / path.name)
+    report = api.grade(name, [tmp_path / "in"], out=tmp_path / "out", jobs=2, progress=False)
+    assert len(report.results) == len(STUDENTS) * len(examples)
+    assert len({r.seed for r in report.results}) == len(report.results), "every copy has its own data"
+    by_example: dict[str, list[tuple[str, float, dict[str, float]]]] = {}
+    for result in report.results:
+        assert result.outcome != "error", f"{name}/{result.id}: {result.output}"
+        by_example.setdefault(Path(result.source).stem, []).append(
+            (result.id, round(result.score, 6), {t.name: t.score for t in result.tests}))
+    spread = []
+    for stem, graded in sorted(by_example.items()):
+        assert len(graded) == len(STUDENTS)
+        if len({score for _, score, _ in graded}) > 1:
+            first = graded[0][2]
+            differ = sorted({check for _, _, d in graded for check, s in d.items()
+                             if s != first.get(check)})
+            spread.append(f"{stem}: scores {sorted(score for _, score, _ in graded)} "
+                          f"(checks that differ: {', '.join(differ)})")
     assert not spread, f"{name}: a score depends on the unseen data:\n" + "\n".join(spread)
