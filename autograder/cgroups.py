@@ -28,8 +28,10 @@ import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
-__all__ = ["SlotCgroup", "cgroup_support", "slot_cgroup"]
+__all__ = ["SlotCgroup", "cgroup_support", "pidfd_kill", "pidfd_open", "pidfd_unreaped",
+           "pidfds_supported", "signal_listed", "slot_cgroup"]
 
 CGROUP_ROOT = Path("/sys/fs/cgroup")
 #: name of the grader's folder in each hierarchy
@@ -41,6 +43,9 @@ V2_WEIGHT = 100
 FREEZE_WAIT = 2.0
 #: rounds of "kill what is listed" before giving up (each round waits a little)
 KILL_ROUNDS = 200
+#: the first wait after a round, doubled each round up to ROUND_PAUSE (seconds)
+FIRST_PAUSE = 0.0005
+ROUND_PAUSE = 0.005
 
 
 @dataclass(frozen=True)
@@ -77,28 +82,41 @@ class SlotCgroup:
     def kill_all(self) -> bool:
         """Kill every process of the slot; True when none is left.
 
-        Frozen processes cannot fork, so one round kills them all; without a
-        freezer, rounds repeat until the list stays empty (``pids.max`` bounds
-        how many a round can meet).
+        A round kills what is listed: ``cgroup.kill`` (v2), or else each listed
+        process while the slot is frozen (frozen processes cannot fork, so one such
+        round kills them all; without a freezer, rounds repeat until the list stays
+        empty, and ``pids.max`` bounds how many a round can meet). Between rounds
+        the sweep only waits while every listed process is one it already killed
+        (it is exiting and cannot fork), so a slot that is empty, or empty a moment
+        later, costs a few small reads and no freeze.
         """
+        killed: dict[int, int] = {}  # pid -> pidfd of a process this sweep killed
+        try:
+            for attempt in range(KILL_ROUNDS):
+                listed = self.pids()
+                if not listed:
+                    return True
+                if not all(_still_killed(killed, pid) for pid in listed):
+                    self._kill_round(killed)
+                time.sleep(_pause(attempt))
+            return not self.pids()
+        finally:
+            for fd in killed.values():
+                os.close(fd)
+
+    def _kill_round(self, killed: dict[int, int]) -> None:
         if self.version == 2:
             try:
                 (self.dirs[0] / "cgroup.kill").write_text("1")
+                return  # the kernel kills every member, and a fork racing with it
             except OSError:
-                pass
-        for _ in range(KILL_ROUNDS):
-            frozen = self._freeze()
-            for pid in self.pids():
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
+                pass  # before Linux 5.14: one process at a time
+        frozen = self._freeze()
+        try:
+            signal_listed(self.pids, killed)
+        finally:
             if frozen:
                 self._thaw()
-            if not self.pids():
-                return True
-            time.sleep(0.005)
-        return not self.pids()
 
     def _freeze(self) -> bool:
         if self.freezer is None:
@@ -116,6 +134,12 @@ class SlotCgroup:
     def _thaw(self) -> None:
         # SIGKILL is delivered only to running tasks: thaw so that the killed exit.
         (self.freezer / "freezer.state").write_text("THAWED")  # type: ignore[operator]
+
+
+def _pause(attempt: int) -> float:
+    """Seconds to wait after round ``attempt``: short at first (most processes exit in
+    well under a millisecond), then :data:`ROUND_PAUSE`."""
+    return min(ROUND_PAUSE, FIRST_PAUSE * 2 ** attempt)
 
 
 def slot_cgroup(slot: int, *, processes: int, create: bool = True) -> SlotCgroup | None:
@@ -230,3 +254,112 @@ def cgroup_support() -> str:
     version, roots, freezer = layout
     kill = "cgroup.kill" if version == 2 else ("freezer" if freezer else "repeated sweeps")
     return f"cgroup v{version} per slot: equal CPU weight, pids.max, kill by {kill}."
+
+
+# -- signals through pidfds ----------------------------------------------------------
+#
+# A process is signalled through a pidfd, never by its number: a number read from a
+# listing (cgroup.procs, /proc) may belong to another process by the time the signal
+# is sent, once the first holder has exited and been reaped, and the kernel hands
+# numbers out again (pid_max may be as low as 32768). A pidfd names one process; a
+# signal through it reaches that process or, once it is reaped, nobody.
+
+#: ``pidfd_send_signal`` flag (Linux 6.9): signal the process group that the pidfd's
+#: process leads, found by the kernel's pid object rather than by number
+PIDFD_SIGNAL_PROCESS_GROUP = 4
+
+
+@functools.cache
+def pidfds_supported() -> bool:
+    """Whether this kernel has pidfds (Linux 5.3+) and Python exposes them."""
+    try:
+        os.close(os.pidfd_open(os.getpid()))
+    except (AttributeError, OSError):
+        return False
+    return True
+
+
+def pidfd_open(pid: int) -> int | None:
+    """A pidfd of the process that has number ``pid`` now; None when there is none."""
+    try:
+        return os.pidfd_open(pid)
+    except ProcessLookupError:
+        return None
+
+
+def pidfd_kill(fd: int, *, group: bool = False) -> bool:
+    """SIGKILL through ``fd`` (with ``group``: its process group); False when nobody was left.
+
+    Without ``group``, a zombie not yet reaped still counts as signalled. With
+    ``group``, a kernel before Linux 6.9 raises ``OSError`` (``EINVAL``).
+    """
+    try:
+        flags = PIDFD_SIGNAL_PROCESS_GROUP if group else 0
+        signal.pidfd_send_signal(fd, signal.SIGKILL, None, flags)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def pidfd_unreaped(fd: int) -> bool:
+    """Whether the process of ``fd`` still exists (running, or a zombie not yet reaped)."""
+    try:
+        signal.pidfd_send_signal(fd, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists; this process may not signal it
+        return True
+    return True
+
+
+def signal_listed(listing: Callable[[], set[int]], killed: dict[int, int]) -> None:
+    """SIGKILL every process ``listing()`` names; record each one's pidfd in ``killed``.
+
+    The numbers are listed, a pidfd is opened for each, and the list is read again:
+    a pidfd opened on a number that is still listed names a listed process (had the
+    first holder of the number been reaped in between, the signal through its pidfd
+    reaches nobody, and the newcomer is met by the next round). Processes already
+    in ``killed`` are not signalled again. Without pidfds (Linux before 5.3) each
+    listed number is signalled, which is as good as the listing is fresh.
+    """
+    if not pidfds_supported():
+        for pid in listing():
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        return
+    opened: dict[int, int] = {}
+    unopened: list[int] = []  # no pidfd to be had (out of descriptors): by number
+    for pid in listing():
+        if not _still_killed(killed, pid):
+            try:
+                fd = pidfd_open(pid)
+            except OSError:
+                unopened.append(pid)
+                continue
+            if fd is not None:
+                opened[pid] = fd
+    members = listing()
+    for pid, fd in opened.items():
+        if pid in members and pidfd_kill(fd):
+            killed[pid] = fd
+        else:
+            os.close(fd)
+    for pid in unopened:
+        if pid in members:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+def _still_killed(killed: dict[int, int], pid: int) -> bool:
+    """``pid`` names a process this sweep killed (exiting, it cannot fork any more)."""
+    fd = killed.get(pid)
+    if fd is None:
+        return False
+    if pidfd_unreaped(fd):
+        return True
+    os.close(killed.pop(pid))  # reaped: the number now names another process
+    return False

@@ -269,18 +269,42 @@ class _Analyzer:
 
     def _parse(self, source: str, where: _Where, label: str) -> ast.Module | None:
         try:
-            code = self.transformer.transform_cell(source)
-            return ast.parse(code)
+            return self._parse_python(source) or ast.parse(self.transformer.transform_cell(source))
         except SyntaxError as exc:
             line = where.fixed if where.fixed is not None else where.base + (exc.lineno or 1)
             self._error(where, line, f"{exc.msg}{label}")
-        except (ValueError, RecursionError, MemoryError) as exc:
+        except RecursionError:
+            # Where the parser gives up depends on the Python version (3.11.2 stops
+            # in ast.parse where 3.11.7 parses and the walk stops): one message for both.
+            self._error(where, where.line(), f"too deeply nested to check{label}")
+        except (ValueError, MemoryError) as exc:
             self._error(where, where.line(), f"cannot be parsed "
                         f"({type(exc).__name__}){label}")
         except Exception as exc:  # IPython's transformer on odd input
             self._error(where, where.line(), f"IPython syntax could not be "
                         f"converted ({type(exc).__name__}){label}")
         return None
+
+    def _parse_python(self, source: str) -> ast.Module | None:
+        """The tree of a cell that is Python once IPython's line passes ran; else None.
+
+        ``transform_cell`` runs line passes (blank first lines, common indentation,
+        pasted prompts, a ``%%`` cell magic), then token passes that tokenize the
+        whole cell for each special line (``%magic``, ``!cmd``, ``a = %magic``,
+        ``obj?``), most of a scan's cost. Every token pass looks for a token that
+        cannot stand there in Python, so code that parses after the line passes
+        is what ``transform_cell`` would return: it is parsed without them. Any
+        other cell (or any failure here) takes the whole ``transform_cell``, so
+        its tree, or its error, is exactly as before.
+        """
+        cell = source if source.endswith("\n") else source + "\n"
+        lines = cell.splitlines(keepends=True)
+        try:
+            for transform in self.transformer.cleanup_transforms + self.transformer.line_transforms:
+                lines = transform(lines)
+            return ast.parse("".join(lines))
+        except Exception:  # noqa: BLE001 - the whole transform decides, and reports
+            return None
 
     def _error(self, where: _Where, line: int, message: str) -> None:
         self.errors.append(f"cell {where.cell}, line {line}: {message}")
@@ -403,7 +427,7 @@ class _Analyzer:
 
     def _stmt(self, node: ast.stmt, ctx: _Ctx) -> None:
         if not ctx.scopes:  # each module-level statement has its own sink
-            ctx = replace(ctx, sink=_Sink())
+            ctx = _Ctx(ctx.where, ctx.scopes, ctx.owner, _Sink())
         handler = getattr(self, f"_stmt_{type(node).__name__}", None)
         if handler is not None:
             handler(node, ctx)
@@ -597,14 +621,14 @@ class _Analyzer:
                 names = {n.id for g in item.generators for n in ast.walk(g.target)
                          if isinstance(n, ast.Name)}
                 inner = _Scope(bindings=dict.fromkeys(names), kind="comprehension")
-                stack.extend((child, (*scopes, inner)) for child in ast.iter_child_nodes(item))
+                stack.extend((child, (*scopes, inner)) for child in _children(item))
             elif isinstance(item, ast.NamedExpr):
                 self._walrus(item.target.id, scopes, ctx)
                 stack.append((item.value, scopes))
             else:
                 if isinstance(item, ast.Call):
-                    self._call(item, scopes, replace(ctx, scopes=scopes))
-                stack.extend((child, scopes) for child in ast.iter_child_nodes(item))
+                    self._call(item, scopes, _Ctx(ctx.where, scopes, ctx.owner, ctx.sink))
+                stack.extend((child, scopes) for child in _children(item))
 
     def _chain(self, node: ast.Name | ast.Attribute, scopes: tuple[_Scope, ...],
                ctx: _Ctx) -> ast.expr | None:
@@ -779,8 +803,23 @@ def _local_names(body: list[ast.stmt]) -> tuple[set[str], set[str], set[str]]:
             bound.add(node.name)
         elif isinstance(node, ast.pattern):
             bound.update(_pattern_names(node))
-        stack.extend(ast.iter_child_nodes(node))
+        stack.extend(_children(node))
     return bound, declared_global, declared_nonlocal
+
+
+def _children(node: ast.AST) -> list[ast.AST]:
+    """``list(ast.iter_child_nodes(node))`` in the same order, without two generators, and
+    without the ``ctx`` marker (``Load``, ``Store``) of a name, which holds no name."""
+    found: list[ast.AST] = []
+    for name in node._fields:
+        if name == "ctx":
+            continue
+        value = getattr(node, name, None)
+        if isinstance(value, ast.AST):
+            found.append(value)
+        elif isinstance(value, list):
+            found.extend(item for item in value if isinstance(item, ast.AST))
+    return found
 
 
 def _pattern_names(pattern: ast.AST) -> set[str]:

@@ -22,7 +22,16 @@ import pytest
 
 from autograder import cgroups
 from autograder.sandbox import IsolationPolicy, enter_sandbox, probe_support
-from autograder.session import claim_slot, kill_descendants, kill_user, slot_lock_dir
+from autograder.session import (
+    _kill_listed,
+    _proc_stat,
+    child_pidfd,
+    claim_slot,
+    kill_child,
+    kill_descendants,
+    kill_user,
+    slot_lock_dir,
+)
 
 # Slots claimed like a grader's, held while the tests run: a grader running at the
 # same time never uses (or sweeps) their user ids and cgroups.
@@ -320,3 +329,159 @@ def test_a_lock_folder_planted_by_another_user_is_refused(monkeypatch: pytest.Mo
     finally:
         shutil.rmtree(shared, ignore_errors=True)
     assert answer.startswith("AutograderError") and "not a private folder" in answer, answer
+
+
+# ------------------------------------------------------ signals never go by a stale number
+
+def sleeper(*, uid: int | None = None, session: bool = False) -> int:
+    """A forked child that sleeps (as ``uid``, in a session of its own if asked)."""
+    pid = os.fork()
+    if pid == 0:
+        try:
+            if session:
+                os.setsid()
+            if uid is not None:
+                os.setresuid(uid, uid, uid)
+            time.sleep(60)
+        finally:
+            os._exit(0)
+    return pid
+
+
+def alive(pid: int) -> bool:
+    """Whether our child ``pid`` is still running (it is reaped if it ended)."""
+    return os.waitpid(pid, os.WNOHANG) == (0, 0)
+
+
+def reuse_number(number: int, reaped: list[int]) -> int | None:
+    """A new sleeping child, leading a session, whose pid is ``number`` (None if the
+    kernel would not give it in a few tries: other processes fork meanwhile)."""
+    last_pid = Path("/proc/sys/kernel/ns_last_pid")
+    for _ in range(50):
+        try:
+            last_pid.write_text(str(number - 1))
+        except OSError:
+            return None
+        pid = sleeper(session=True)
+        reaped.append(pid)
+        if pid == number:
+            end = time.monotonic() + DEADLINE
+            while os.getsid(pid) != pid and time.monotonic() < end:
+                time.sleep(0.001)  # until it leads its session: a group `killpg` would hit
+            return pid
+        os.kill(pid, signal.SIGKILL)
+    return None
+
+
+def dead_child_pidfd(reaped: list[int]) -> tuple[int, int]:
+    """(pid, pidfd) of a child that led a session, then was killed and reaped."""
+    pid = sleeper(session=True)
+    fd = os.pidfd_open(pid)
+    while os.getsid(pid) != pid:
+        time.sleep(0.001)
+    os.kill(pid, signal.SIGKILL)
+    os.waitpid(pid, 0)
+    return pid, fd
+
+
+def test_killing_a_reaped_child_spares_the_process_that_got_its_number(reaped: list[int]) -> None:
+    """The warm parent reaps a child at once; its number, and group, may then be another's."""
+    require_root("choosing the next pid (ns_last_pid)")
+    if not cgroups.pidfds_supported():
+        pytest.skip("no pidfds on this kernel (Linux 5.3+)")
+    pid, fd = dead_child_pidfd(reaped)
+    try:
+        newcomer = reuse_number(pid, reaped)
+        if newcomer is None:
+            pytest.skip(f"could not get pid {pid} again (ns_last_pid, or a busy machine)")
+        kill_child(pid, fd)
+        time.sleep(0.05)
+        assert alive(newcomer), "kill_child signalled the new holder of a reaped child's number"
+    finally:
+        os.close(fd)
+
+
+def test_the_group_is_killed_after_its_leader_was_reaped(reaped: list[int]) -> None:
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # a leader whose child outlives it, holding the pipe
+        try:
+            os.close(read_fd)
+            os.setsid()
+            if os.fork() == 0:
+                time.sleep(60)
+        finally:
+            os._exit(0)
+    os.close(write_fd)
+    fd = os.pidfd_open(pid)
+    try:
+        os.waitpid(pid, 0)  # reaped, as the warm parent does
+        try:
+            signal.pidfd_send_signal(fd, 0, None, cgroups.PIDFD_SIGNAL_PROCESS_GROUP)
+        except OSError:
+            pytest.skip("no PIDFD_SIGNAL_PROCESS_GROUP on this kernel (Linux 6.9+)")
+        kill_child(pid, fd)
+        assert beacon_closed(read_fd), "the reaped leader's group survived"
+    finally:
+        os.close(fd)
+        os.close(read_fd)
+
+
+def test_child_pidfd_needs_the_warm_parent_as_parent(reaped: list[int]) -> None:
+    if not cgroups.pidfds_supported():
+        pytest.skip("no pidfds on this kernel (Linux 5.3+)")
+    pid = sleeper()
+    reaped.append(pid)
+    assert child_pidfd(pid, 1) is None  # not init's child
+    fd = child_pidfd(pid, os.getpid())
+    assert fd is not None
+    os.close(fd)
+    os.kill(pid, signal.SIGKILL)
+    os.waitpid(pid, 0)
+    assert child_pidfd(pid, os.getpid()) is None  # reaped: nothing to name
+
+
+def test_a_listed_process_is_killed_only_if_it_is_still_the_one_listed(reaped: list[int]) -> None:
+    pid = sleeper()
+    reaped.append(pid)
+    started = _proc_stat(pid).started  # type: ignore[union-attr]
+    _kill_listed(pid, started + 1)  # another process that once had this number
+    time.sleep(0.05)
+    assert alive(pid)
+    _kill_listed(pid, started)
+    os.waitpid(pid, 0)  # it ends
+
+
+def test_signal_listed_kills_only_numbers_listed_again(reaped: list[int]) -> None:
+    if not cgroups.pidfds_supported():
+        pytest.skip("no pidfds on this kernel (Linux 5.3+)")
+    pid = sleeper()
+    reaped.append(pid)
+    killed: dict[int, int] = {}
+    listings = iter([{pid}, set()])  # gone from the list by the second reading
+    cgroups.signal_listed(lambda: next(listings), killed)
+    time.sleep(0.05)
+    assert alive(pid) and killed == {}
+    cgroups.signal_listed(lambda: {pid}, killed)
+    os.waitpid(pid, 0)
+    assert list(killed) == [pid]
+    for fd in killed.values():
+        os.close(fd)
+
+
+def test_kill_user_spares_other_users_and_leaves_the_grader_root(reaped: list[int]) -> None:
+    require_root("users of the slots' own")
+    other_uid = IsolationPolicy().base_uid + OTHER_SLOT
+    target, bystander = sleeper(uid=HYDRA_UID), sleeper(uid=other_uid)
+    reaped.extend([target, bystander])
+    time.sleep(0.1)  # both have taken their uid
+    before = Path("/proc/self/status").read_text()
+    assert kill_user(HYDRA_UID)
+    os.waitpid(target, 0)
+    assert alive(bystander)
+    assert uid_processes(HYDRA_UID) == []
+    assert os.getresuid() == (0, 0, 0)
+    after = Path("/proc/self/status").read_text()
+    for field in ("Uid:", "CapEff:", "CapPrm:"):
+        assert [l for l in after.splitlines() if l.startswith(field)] == \
+            [l for l in before.splitlines() if l.startswith(field)]

@@ -303,8 +303,6 @@ def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
     "x = 1\n\tif x:\n  y",                  # not Python at all: the error comes from the full pass
 ])
 def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> None:
-    import ast
-
     from IPython.core.inputtransformer2 import TransformerManager
 
     from autograder.staticscan import _Analyzer, _Where

@@ -1,0 +1,294 @@
+"""Where one submission's time goes: grade hull submissions with one Grader and time each phase.
+
+Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]``.
+
+Grades ``count`` submissions (the hull assignment's examples, in turn) with one
+:class:`autograder.grading.Grader`, after one warm-up submission that starts the
+warm worker and is not counted, and times each phase of every submission:
+
+* static scan: ``staticscan.scan`` of the cells (grader);
+* worker start/sandbox: from the request for a child until its "started" message
+  (grader, the warm parent's ``fork`` and the child entering the sandbox);
+* notebook run: from "started" to "ready" (the child running the cells);
+* pytest session and collection: the inner ``pytest.main`` outside the check
+  items (configuration, plugins, importing and collecting the checks);
+* checks: the check items, with the child's time answering their calls;
+* sweep: killing the child and sweeping the slot (:func:`autograder.session.kill_child`
+  and :func:`~autograder.session.sweep_slot`), most of whose wall time is the
+  killed child's own exit;
+* other: the rest of ``Grader.grade`` (reading the notebook, results).
+
+For each phase it prints the median wall and CPU milliseconds per submission and
+the phase's share of all CPU (from the means; grader, warm parent and child
+together). With ``--before REF`` (default: the commit before the sweep and scan
+changes) it also runs the old code of ``REF`` in the same run: the old scan on
+every submission's cells beside the new one (and checks both report the same),
+and the old sweep on every other submission, and prints the ratios old / new.
+CPU of the child is read from ``/proc/<pid>/stat``; figures move with the load of
+the machine, the ratios (taken in one run) less. Not a test: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import subprocess
+import sys
+import time
+import types
+from collections import defaultdict
+from pathlib import Path
+from typing import Any, Callable
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
+
+import pytest  # noqa: E402
+
+from autograder import grading, session, staticscan  # noqa: E402
+from autograder.assignment import load_assignment  # noqa: E402
+from autograder.cputime import process_cpu_seconds  # noqa: E402
+
+HULL = ROOT / "assignments" / "hull"
+#: the last commit before the sweep (issue 14, issue 9) and scan changes
+BEFORE = "5fc7bef"
+PHASES = ("static scan", "worker start/sandbox", "notebook run", "pytest session/collection",
+          "checks", "sweep", "other")
+
+
+class Probe:
+    """Wall seconds, grader CPU seconds and worker CPU seconds per phase of one submission."""
+
+    def __init__(self) -> None:
+        self.wall: dict[str, float] = defaultdict(float)
+        self.cpu: dict[str, float] = defaultdict(float)  # this process (the grader)
+        self.worker: dict[str, float] = defaultdict(float)  # the warm parent and the child
+        self.child: dict[str, float] = {}  # the child's CPU clock at "started" and "ready"
+        self.spawned: tuple[float, float, float] | None = None
+
+    def add(self, phase: str, wall: float, cpu: float, worker: float = 0.0) -> None:
+        self.wall[phase] += wall
+        self.cpu[phase] += cpu
+        self.worker[phase] += worker
+
+    def total_cpu(self, phase: str) -> float:
+        return self.cpu[phase] + self.worker[phase]
+
+
+def timed(probe: Callable[[], Probe], phase: str,
+          function: Callable[..., Any]) -> Callable[..., Any]:
+    """``function``, charging its wall and grader CPU time to ``phase``."""
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        wall, cpu = time.perf_counter(), time.process_time()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            probe().add(phase, time.perf_counter() - wall, time.process_time() - cpu)
+    return wrapper
+
+
+class PytestTimer:
+    """Times collection and the check items of the inner pytest run."""
+
+    def __init__(self, probe: Callable[[], Probe]) -> None:
+        self.probe = probe
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_collection(self, session: pytest.Session) -> Any:
+        wall, cpu = time.perf_counter(), time.process_time()
+        yield
+        self.probe().add("collection", time.perf_counter() - wall, time.process_time() - cpu)
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(self, item: pytest.Item, nextitem: pytest.Item | None) -> Any:
+        wall, cpu = time.perf_counter(), time.process_time()
+        yield
+        self.probe().add("checks", time.perf_counter() - wall, time.process_time() - cpu)
+
+
+def load_before(ref: str) -> dict[str, types.ModuleType] | None:
+    """The modules cgroups, session and staticscan as they were at ``ref``; None if git
+    cannot show them (not a git checkout, or ``ref`` unknown)."""
+    modules: dict[str, types.ModuleType] = {}
+    for name in ("cgroups", "staticscan", "session"):
+        shown = subprocess.run(["git", "-C", str(ROOT), "show", f"{ref}:autograder/{name}.py"],
+                               capture_output=True, text=True)
+        if shown.returncode != 0:
+            print(f"(no old code path: git show {ref}:autograder/{name}.py failed: "
+                  f"{shown.stderr.strip()[:200]})")
+            return None
+        module = types.ModuleType(f"before_{name}")
+        sys.modules[module.__name__] = module  # dataclasses look their module up
+        exec(compile(shown.stdout, f"{ref}:autograder/{name}.py", "exec"), module.__dict__)
+        modules[name] = module
+    modules["session"].cgroups = modules["cgroups"]
+    return modules
+
+
+def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType] | None,
+               old_sweep: Callable[[], bool], scan_pairs: list[tuple[float, float, bool]]) -> None:
+    """Wrap the engine's phases (in this process only) so that they report to ``current()``."""
+    new_scan = staticscan.scan
+
+    def old_scan(sources: Any, forbid: Any) -> tuple[Any, float]:
+        wall = time.perf_counter()
+        assert before is not None
+        return before["staticscan"].scan(sources, forbid), time.perf_counter() - wall
+
+    def scan(sources: Any, forbid: Any) -> Any:
+        # The old scan (outside the phase's figures) runs first on every other
+        # submission, so that neither gets the other's warm caches every time.
+        first = before is not None and len(scan_pairs) % 2 == 0
+        if first:
+            old, old_wall = old_scan(sources, forbid)
+        wall, cpu = time.perf_counter(), time.process_time()
+        report = new_scan(sources, forbid)
+        new_wall = time.perf_counter() - wall
+        current().add("static scan", new_wall, time.process_time() - cpu)
+        if before is not None:
+            if not first:
+                old, old_wall = old_scan(sources, forbid)
+            scan_pairs.append((old_wall, new_wall, repr(old) == repr(report)))
+        return report
+    staticscan.scan = scan
+
+    spawn, wait = session.StudentSession._spawn, session.StudentSession._await
+
+    def spawn_child(self: session.StudentSession) -> None:
+        warm = self.slot.warm_parent
+        warm_before = process_cpu_seconds(warm) if warm else 0.0
+        wall, cpu = time.perf_counter(), time.process_time()
+        spawn(self)
+        fork = process_cpu_seconds(self.slot.warm_parent or 0) - warm_before  # its fork()
+        current().spawned = (wall, cpu, max(0.0, fork))
+
+    def await_message(self: session.StudentSession, *args: Any) -> Any:
+        message = wait(self, *args)
+        op = message.get("op") if isinstance(message, dict) else None
+        probe = current()
+        if op in ("started", "ready") and self._pid is not None:
+            probe.child[op] = process_cpu_seconds(self._pid)
+        if op == "started" and probe.spawned is not None:
+            wall, cpu, fork = probe.spawned
+            probe.add("worker start/sandbox", time.perf_counter() - wall,
+                      time.process_time() - cpu, fork + probe.child["started"])
+            probe.spawned, probe.child["mark"] = None, time.perf_counter()
+        elif op == "ready" and "mark" in probe.child:
+            probe.add("notebook run", time.perf_counter() - probe.child.pop("mark"), 0.0,
+                      probe.child["ready"] - probe.child.get("started", 0.0))
+        return message
+    session.StudentSession._spawn, session.StudentSession._await = spawn_child, await_message
+
+    kill_child, sweep_slot = session.kill_child, session.sweep_slot
+
+    def kill(pid: int, pidfd: int | None) -> None:
+        if before is not None and old_sweep():
+            before["session"].kill_group(pid)
+        else:
+            kill_child(pid, pidfd)
+    timed_kill = timed(current, "sweep", kill)
+
+    def read_then_kill(pid: int, pidfd: int | None) -> None:
+        probe = current()
+        if "ready" in probe.child:  # the child's time answering the checks' calls
+            probe.worker["checks"] += max(0.0, process_cpu_seconds(pid) - probe.child.pop("ready"))
+        timed_kill(pid, pidfd)
+
+    def sweep(policy: Any, slot: int, warm_parent: int | None, child: Any = None) -> None:
+        if before is not None and old_sweep():
+            before["session"].sweep_slot(policy, slot, warm_parent)
+        else:
+            sweep_slot(policy, slot, warm_parent, child)
+    session.kill_child = read_then_kill
+    session.sweep_slot = timed(current, "sweep", sweep)
+
+    main = pytest.main
+
+    def pytest_main(args: Any, plugins: Any = None) -> Any:
+        return main(args, plugins=[*(plugins or []), PytestTimer(current)])
+    grading.run_pytest = timed(current, "pytest", grading.run_pytest)
+    pytest.main = pytest_main  # type: ignore[assignment]
+
+
+def median_ms(values: list[float]) -> float:
+    return 1000 * statistics.median(values) if values else 0.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--count", type=int, default=24, help="submissions to time (default 24)")
+    parser.add_argument("--before", default=BEFORE,
+                        help="git revision whose scan and sweep to compare with "
+                        f"(default {BEFORE})")
+    parser.add_argument("--no-before", action="store_true", help="time this code only")
+    options = parser.parse_args()
+
+    before = None if options.no_before else load_before(options.before)
+    probes: list[Probe] = [Probe()]
+    scan_pairs: list[tuple[float, float, bool]] = []
+    old_sweep = lambda: len(probes) % 2 == 0  # noqa: E731 - every other submission
+    instrument(lambda: probes[-1], before, old_sweep, scan_pairs)
+
+    examples = sorted((HULL / "examples").glob("*.ipynb"))
+    rows: list[tuple[Probe, bool, float, float]] = []
+    with grading.Grader(load_assignment(HULL)) as grader:
+        grader.grade(HULL / "examples" / "solution.ipynb")  # warm-up: starts the worker
+        scan_pairs.clear()
+        for index in range(options.count):
+            probes.append(Probe())
+            wall, cpu = time.perf_counter(), time.process_time()
+            grader.grade(examples[index % len(examples)])
+            rows.append((probes[-1], old_sweep(), time.perf_counter() - wall,
+                         time.process_time() - cpu))
+    report(rows, scan_pairs, before is not None, options.before)
+
+
+def report(rows: list[tuple[Probe, bool, float, float]],
+           scan_pairs: list[tuple[float, float, bool]], compared: bool, ref: str) -> None:
+    # With --before the old sweep ran on every other submission: the breakdown uses the others.
+    current = [row for row in rows if not (compared and row[1])] or rows
+    for probe, _, wall, cpu in current:
+        # The check items run inside the pytest session: the session is what is left.
+        probe.add("pytest session/collection", probe.wall.pop("pytest") - probe.wall["checks"],
+                  probe.cpu.pop("pytest") - probe.cpu["checks"])
+        probe.add("other", max(0.0, wall - sum(probe.wall[p] for p in PHASES[:-1])),
+                  max(0.0, cpu - sum(probe.cpu[p] for p in PHASES[:-1])))
+    means = {p: statistics.fmean(pr.total_cpu(p) for pr, *_ in current) for p in PHASES}
+    total = sum(means.values()) or 1.0
+    print(f"hull, {len(rows)} submissions timed ({len(current)} in the breakdown), one Grader, "
+          "after one warm-up submission; CPU = grader + warm parent + child")
+    print(f"{'phase':28} {'wall ms':>9} {'CPU ms':>9} {'grader':>8} {'worker':>8} "
+          f"{'CPU share':>10}")
+    for phase in PHASES:
+        print(f"{phase:28} {median_ms([p.wall[phase] for p, *_ in current]):9.1f} "
+              f"{median_ms([p.total_cpu(phase) for p, *_ in current]):9.1f} "
+              f"{median_ms([p.cpu[phase] for p, *_ in current]):8.1f} "
+              f"{median_ms([p.worker[phase] for p, *_ in current]):8.1f} "
+              f"{100 * means[phase] / total:9.1f}%")
+    print(f"{'whole submission':28} {median_ms([w for _, _, w, _ in current]):9.1f} "
+          f"{1000 * total:9.1f}"
+          "   (medians per submission; the CPU total and shares are from means)")
+    print("  of which collection (inside the pytest session): "
+          f"{median_ms([p.wall['collection'] for p, *_ in current]):.1f} ms wall")
+    if not compared:
+        return
+    old = [p for p, is_old, *_ in rows if is_old]
+    new = [p for p, is_old, *_ in rows if not is_old]
+    print(f"\nbefore ({ref}) / after, in this run (medians per submission):")
+    for label, pick in (("sweep wall", lambda p: p.wall["sweep"]),
+                        ("sweep CPU", lambda p: p.cpu["sweep"])):
+        o, n = median_ms([pick(p) for p in old]), median_ms([pick(p) for p in new])
+        print(f"  {label:11} before {o:8.2f} ms  after {n:8.2f} ms  ratio {_ratio(o, n)}"
+              f"  ({len(old)} / {len(new)} submissions)")
+    o, n = median_ms([a for a, _, _ in scan_pairs]), median_ms([b for _, b, _ in scan_pairs])
+    same = sum(s for _, _, s in scan_pairs)
+    print(f"  {'scan wall':11} before {o:8.2f} ms  after {n:8.2f} ms  ratio {_ratio(o, n)}"
+          f"  (same report on {same} of {len(scan_pairs)} submissions)")
+
+
+def _ratio(before: float, after: float) -> str:
+    return f"{before / after:6.1f}x" if after else "   n/a"
+
+
+if __name__ == "__main__":
+    main()
