@@ -346,13 +346,19 @@ def _thin_straights(points: np.ndarray) -> np.ndarray:
 
 
 def _unseen_car(rng: np.random.Generator) -> list[np.ndarray]:
-    """The car moved and scaled, a little shaken, with straight runs down to their two ends:
-    long steps next to short ones, where the choice of parameter shows."""
+    """The car moved and scaled, a little shaken, with straight runs down to their two ends
+    and every other point of the long strokes: long steps next to short ones, where the
+    choice of parameter shows. With all the points, straight lines between them came
+    within 1.6-2.7% of the car (the pass line is 2%), so their score hung on the seed;
+    now they are 6.3-6.7% off for every seed (half the points), the point number as the
+    parameter 3.7-4.1%, and a correct drawing stays within 0.1%."""
     scale, shift = rng.uniform(0.5, 2.0), rng.uniform(-20.0, 20.0, 2)
     strokes = []
     for stroke in car():
         closed = np.array_equal(stroke[0], stroke[-1])
         pts = _thin_straights(stroke)
+        if len(pts) > 6:
+            pts = np.vstack([pts[:-1:2], pts[-1:]])
         pts = pts + rng.normal(0.0, 0.003, pts.shape)
         if closed:
             pts[-1] = pts[0]
