@@ -189,6 +189,10 @@ def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentPar
     srv.add_argument("--lease", type=_positive_float, default=None, metavar="SECONDS",
                      help="how long a grading claim lasts without renewal before another grader "
                           "takes the job over (default: 30)")
+    srv.add_argument("--dask", default=None, metavar="ADDRESS",
+                     help="grade on a Dask cluster instead of local grading processes: local:N, "
+                          "tls://HOST:PORT, or tcp://127.0.0.1:PORT (needs numgrade[dask])")
+    _cluster_security_options(srv)
 
     ros = commands.add_parser("roster", help="import a roster CSV (id, name, email[, role]) into a course")
     ros.add_argument("course", type=Path, help="the course TOML file")
@@ -318,7 +322,7 @@ def _serve(args: argparse.Namespace) -> int:
     from autograder.service.server import serve
 
     serve(args.course, host=args.host, port=args.port, database=args.database, jobs=args.jobs,
-          lease_seconds=args.lease)
+          lease_seconds=args.lease, dask=_dask(args))
     return 0
 
 

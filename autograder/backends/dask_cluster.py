@@ -19,6 +19,9 @@ How a grading travels:
   retries a student's infinite loop; a worker that dies mid-grade makes Dask run
   the task elsewhere (``distributed.scheduler.allowed-failures`` times), then the
   client records an ``error`` result, retried on the next run.
+
+:class:`GradingStream` sends gradings with the same pieces one at a time, as
+they arrive: the grading service's dispatcher (``autograder serve --dask``).
 """
 
 from __future__ import annotations
@@ -176,16 +179,26 @@ def security_for(tls: TLSFiles | None, *, role: str = "client") -> Security | No
                     **{f"tls_{role}_cert": str(tls.cert), f"tls_{role}_key": key})
 
 
-def store_payload(out_dir: Path, job: Job, payload: Any, assignment: Assignment, key: str) -> SubmissionResult:
-    """Write what a worker sent for ``job``: its files, then ``results.json``, then the feedback page."""
+def payload_files(folder: Path, payload: Any, label: str) -> SubmissionResult:
+    """Write the files a worker sent beside its result into ``folder``; return the result as sent.
+
+    A name that would leave ``folder`` or replace a file the client writes itself
+    is refused (:class:`EngineError`, naming ``label``).
+    """
     result = SubmissionResult.from_dict(payload["result"])
-    folder = out_dir / job.id
     for name, data in payload.get("files", {}).items():
         relative = PurePosixPath(name)
         if relative.is_absolute() or ".." in relative.parts or name in _CLIENT_FILES \
                 or not isinstance(data, bytes):
-            raise EngineError(f"a worker sent a file named {name!r} for {job.id}; refused")
+            raise EngineError(f"a worker sent a file named {name!r} for {label}; refused")
         atomic_write_bytes(folder / relative, data)
+    return result
+
+
+def store_payload(out_dir: Path, job: Job, payload: Any, assignment: Assignment, key: str) -> SubmissionResult:
+    """Write what a worker sent for ``job``: its files, then ``results.json``, then the feedback page."""
+    folder = out_dir / job.id
+    result = payload_files(folder, payload, job.id)
     result = replace(result, id=job.id, source=str(job.path),
                      key=key if result.outcome != "error" else "")
     write_result(folder, result)
@@ -206,6 +219,19 @@ def local_cluster(workers: int, **options: Any) -> LocalCluster:
     return LocalCluster(**settings)
 
 
+def connect(spec: DaskSpec, *, timeout: float = 30.0) -> tuple[LocalCluster | None, Client]:
+    """A client of the cluster ``spec`` names; for ``local:N`` also the cluster, started here."""
+    workers = spec.local_workers
+    if workers is not None:
+        cluster = local_cluster(workers)
+        return cluster, Client(cluster)
+    try:
+        return None, Client(spec.address, security=security_for(spec.tls), timeout=timeout)
+    except (OSError, TimeoutError) as exc:
+        raise UsageError(f"Could not reach the Dask scheduler at {spec.address}: {exc}. "
+                         "Is it running, and is the address right?") from None
+
+
 def grading_slots(client: Client) -> int:
     """How many gradings the cluster's workers can run at once now."""
     workers = client.scheduler_info(n_workers=-1)["workers"].values()
@@ -219,15 +245,7 @@ class DaskBackend:
         self.spec = spec
 
     def _connect(self) -> tuple[LocalCluster | None, Client]:
-        workers = self.spec.local_workers
-        if workers is not None:
-            cluster = local_cluster(workers)
-            return cluster, Client(cluster)
-        try:
-            return None, Client(self.spec.address, security=security_for(self.spec.tls), timeout=30)
-        except (OSError, TimeoutError) as exc:
-            raise UsageError(f"Could not reach the Dask scheduler at {self.spec.address}: {exc}. "
-                             "Is it running, and is the address right?") from None
+        return connect(self.spec)
 
     def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
             out_dir: Path, finished: Finished) -> None:
@@ -323,6 +341,131 @@ class DaskBackend:
                            assignment.title)
 
 
+# ------------------------------------------------------------------ gradings one at a time
+
+
+def task_payload(future: Any) -> Any:
+    """What a finished grading task returned; :class:`EngineError` saying why it returned nothing."""
+    if future.status == "finished":
+        return future.result()
+    if future.status == "error":
+        exc = future.exception()
+        if isinstance(exc, distributed.KilledWorker):
+            raise EngineError(f"the Dask workers grading it stopped ({type(exc).__name__}: {exc})")
+        raise EngineError(f"the grading task failed on the Dask cluster ({type(exc).__name__}: {exc})")
+    raise EngineError(f"the Dask cluster dropped the grading task (it is {future.status}); "
+                      "the scheduler may have gone away")
+
+
+class GradingStream:
+    """Gradings sent one at a time as they arrive (the service's dispatcher), on one client.
+
+    The pieces are the batch's: one :class:`GradingSlots` per assignment bundle
+    and options, registered when first needed and again when the bundle changes
+    (the slots of the old bundle are closed once nothing graded there is out), and
+    :func:`grade_task` asking for one ``grading`` resource. The caller keeps at
+    most :meth:`slots` tasks out. The connection is made on first use and made
+    again after :meth:`close`; the slots are named apart from a batch run's
+    (``numgrade-service-...``), so a batch on the same cluster never closes them.
+    """
+
+    def __init__(self, spec: DaskSpec, *, connect_timeout: float = 30.0) -> None:
+        self.spec = spec
+        self.connect_timeout = connect_timeout
+        self._cluster: LocalCluster | None = None
+        self._client: Client | None = None
+        self._notes: tuple[str, ...] | None = None
+        self._current: dict[tuple[str, str], str] = {}  # (folder, options) -> the newest slots
+        self._registered: set[str] = set()
+
+    @property
+    def client(self) -> Client:
+        if self._client is not None and self._client.status in ("closing", "closed"):
+            self.close()
+        if self._client is None:
+            self._cluster, self._client = connect(self.spec, timeout=self.connect_timeout)
+        return self._client
+
+    @property
+    def connected(self) -> bool:
+        return self._client is not None and self._client.status == "running"
+
+    def slots(self) -> int:
+        """How many gradings the cluster's workers can run at once now."""
+        return grading_slots(self.client)
+
+    def slots_for(self, assignment: Assignment, options: GradingOptions) -> str:
+        """The name of the grading slots for this assignment as it is now (registered if new).
+
+        Raises :class:`EngineError` when every connected worker refuses them.
+        """
+        if self._notes is None:  # probed in a fresh process: this one has the client's threads
+            self._notes = sandbox_notes()
+        plugin = GradingSlots(make_bundle(assignment), options, engine_fingerprint(), self._notes)
+        plugin.name = f"numgrade-service-{plugin.bundle.digest[:16]}-{options.digest()[:8]}"
+        self._current[(str(assignment.root), options.digest())] = plugin.name
+        if plugin.name not in self._registered:
+            self.client.register_plugin(plugin, name=plugin.name)
+            self._registered.add(plugin.name)
+            DaskBackend._say_worker_problems(self.client, plugin.name)
+        return plugin.name
+
+    def submit(self, slots: str, data: bytes, filename: str, sub_id: str) -> Any:
+        """Send one grading; the future's :func:`task_payload` is what :func:`store_payload` takes."""
+        return self.client.submit(grade_task, slots, data, filename, sub_id,
+                                  key=f"grade-{sub_id}-{uuid.uuid4().hex[:8]}",
+                                  resources={RESOURCE: 1}, pure=False)
+
+    def finished(self, futures: list[Any], timeout: float) -> list[Any]:
+        """The futures among ``futures`` that are done, waiting up to ``timeout`` for the first."""
+        try:
+            done, _ = wait(futures, timeout=timeout, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            return []
+        return list(done)
+
+    def refusal(self, slots: str) -> str:
+        """Why no connected worker grades with ``slots``, or "" (some can, or none is connected)."""
+        try:
+            DaskBackend._say_worker_problems(self.client, slots, quiet=True)
+        except EngineError as exc:
+            return str(exc)
+        return ""
+
+    def forget(self, slots: str) -> None:
+        """Register ``slots`` anew at its next use (fresh slots after an engine failure)."""
+        self._registered.discard(slots)
+
+    def retire_unused(self, in_use: set[str]) -> None:
+        """Close the slots of bundles that changed since, once no grading there is out."""
+        for name in sorted(self._registered - set(self._current.values()) - in_use):
+            self._unregister(name)
+
+    def _unregister(self, name: str) -> None:
+        self._registered.discard(name)
+        try:
+            if self._client is not None:
+                self._client.unregister_worker_plugin(name)
+        except Exception as exc:  # the worker side closes them with the cluster anyway
+            log.warning("could not close the grading slots %s on the workers: %s", name, exc)
+
+    def close(self) -> None:
+        """Close this service's slots on a shared cluster, the client, and a ``local:N`` cluster."""
+        if self._client is not None and self._cluster is None and self._client.status == "running":
+            for name in sorted(self._registered):
+                self._unregister(name)
+        client, cluster = self._client, self._cluster
+        self._client, self._cluster = None, None
+        self._registered.clear()
+        self._current.clear()
+        try:
+            if client is not None:
+                client.close(timeout=10)
+        finally:
+            if cluster is not None:
+                cluster.close(timeout=30)
+
+
 # ------------------------------------------------------------------ the worker command
 
 
@@ -351,5 +494,5 @@ async def _serve(address: str, slots: int, security: Security | None) -> None:
         await asyncio.gather(*(n.close() for n in nannies), return_exceptions=True)
 
 
-__all__ = ["DaskBackend", "GradingSlots", "grade_task", "local_cluster", "run_worker", "sandbox_notes",
-           "security_for", "store_payload"]
+__all__ = ["DaskBackend", "GradingSlots", "GradingStream", "connect", "grade_task", "local_cluster",
+           "payload_files", "run_worker", "sandbox_notes", "security_for", "store_payload", "task_payload"]

@@ -8,6 +8,9 @@ kernel clears that request when a process's credentials change, which the
 engine may do while setting up a slot, so a thread also watches the parent id
 and ends the process when the service is gone. Either way no grading process
 outlives a service killed with SIGKILL, and its unfinished job's lease runs out.
+With ``--dask`` the one process started this way is the dispatcher
+(:mod:`autograder.service.dispatch`); a ``local:N`` cluster's processes are its
+children and end with it.
 """
 
 from __future__ import annotations
@@ -19,7 +22,10 @@ import signal
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from autograder.backends import DaskSpec
 
 _PR_SET_PDEATHSIG = 1
 #: seconds a claim lasts without renewal (the default of ``--lease``)
@@ -34,6 +40,8 @@ class WorkerSettings:
     database_url: str
     lease_seconds: float = LEASE_SECONDS
     poll_seconds: float = 0.2
+    #: grade on this Dask cluster: the pool then runs one dispatcher instead of graders
+    dask: "DaskSpec | None" = None
 
 
 def _ask_kernel_to_kill_us() -> None:
@@ -50,19 +58,28 @@ def _watch(parent: int) -> None:
 
 
 def worker_entry(settings: WorkerSettings, stop: Any, name: str, parent: int) -> None:
-    """The target of a grading process: tie it to ``parent``, then run the grading loop."""
+    """The target of a grading process: tie it to ``parent``, then run the grading loop
+    (or, with ``settings.dask``, the dispatcher's: :mod:`autograder.service.dispatch`)."""
     _ask_kernel_to_kill_us()
     if os.getppid() != parent:  # the service died while this process was starting
         os._exit(1)
     threading.Thread(target=_watch, args=(parent,), daemon=True, name="watch-service").start()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the service; it stops us
+    if settings.dask is not None:
+        from autograder.service.dispatch import dispatcher_main
+
+        dispatcher_main(settings, stop, name, parent)
+        return
     from autograder.service.workers import worker_main
 
     worker_main(settings, stop, name, parent)
 
 
 class GradingPool:
-    """``jobs`` grading processes pulling from the database queue; dead ones are replaced."""
+    """``jobs`` grading processes pulling from the database queue; dead ones are replaced.
+
+    With ``settings.dask``, give ``jobs=1``: one dispatcher sends the jobs to the cluster.
+    """
 
     def __init__(self, settings: WorkerSettings, jobs: int) -> None:
         self.settings = settings
@@ -78,8 +95,10 @@ class GradingPool:
         threading.Thread(target=self._restart_dead, daemon=True, name="grading-pool").start()
 
     def _spawn(self, index: int) -> Any:
+        # A dispatcher of a ``local:N`` cluster starts processes of its own, which a daemonic
+        # process may not; stop() ends it either way, and the kernel does if the service dies.
         proc = self._context.Process(
-            target=worker_entry, name=f"grader-{index}", daemon=True,
+            target=worker_entry, name=f"grader-{index}", daemon=self.settings.dask is None,
             args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid()))
         proc.start()
         return proc

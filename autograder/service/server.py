@@ -10,6 +10,8 @@ from pathlib import Path
 from sqlalchemy import func, select
 
 from autograder.assignment import load_assignment
+from autograder.backends import DaskSpec, load_dask_backend
+from autograder.errors import UsageError
 from autograder.service import auth
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions, upgrade
@@ -68,12 +70,25 @@ def _secret(course: Course) -> bytes:
 
 def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
           database: str | None = None, jobs: int | None = None,
-          lease_seconds: float | None = None, say: bool = True) -> None:
-    """Run the service until interrupted (see ``autograder serve --help``)."""
+          lease_seconds: float | None = None, dask: DaskSpec | str | None = None,
+          say: bool = True) -> None:
+    """Run the service until interrupted (see ``autograder serve --help``).
+
+    ``dask`` (a :class:`~autograder.backends.DaskSpec`, or an address such as
+    ``"local:2"``) grades on a Dask cluster through one dispatcher process
+    instead of ``jobs`` local grading processes; it needs the ``dask`` extra.
+    """
     import uvicorn
 
     from autograder.service.app import create_app
 
+    spec = DaskSpec(dask) if isinstance(dask, str) else dask
+    if spec is not None:
+        if jobs is not None:
+            raise UsageError("--jobs sets the number of local grading processes; with --dask the "
+                             "cluster's grading slots set how many gradings run at once: give one "
+                             "of the two.")
+        load_dask_backend()  # a clear error now, naming the extra, when `distributed` is missing
     course = open_course(course_path, database=database)
     engine = make_engine(course.database_url)
     upgrade(engine)
@@ -86,12 +101,14 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
             print(f"Imported {count} people from {course.roster}; their access tokens are in "
                   f"{tokens} (only there: the database keeps hashes).", flush=True)
     settings = WorkerSettings(course_path=str(course.path), database_url=course.database_url,
-                              **({"lease_seconds": lease_seconds} if lease_seconds else {}))
-    pool = GradingPool(settings, jobs or max(1, (os.cpu_count() or 2)))
+                              dask=spec, **({"lease_seconds": lease_seconds} if lease_seconds else {}))
+    pool = GradingPool(settings, 1 if spec is not None else jobs or max(1, (os.cpu_count() or 2)))
     pool.start()
     if say:
-        print(f"Serving {course.name} on http://{host}:{port}/ with {pool.jobs} grading "
-              f"process(es); database {engine.url.render_as_string(hide_password=True)}.", flush=True)
+        graders = (f"{pool.jobs} grading process(es)" if spec is None
+                   else f"grading on the Dask cluster {spec.address}")
+        print(f"Serving {course.name} on http://{host}:{port}/ with {graders}; "
+              f"database {engine.url.render_as_string(hide_password=True)}.", flush=True)
     try:
         uvicorn.run(create_app(course, factory, secret=_secret(course)), host=host, port=port,
                     log_level="warning", access_log=False)

@@ -94,13 +94,14 @@ def grade_job(graders: _Graders, storage: Storage, submission: Submission,
         # the instructor. SIGINT is ignored in grading processes, so a KeyboardInterrupt
         # here comes from the engine itself, never from a person.
         graders.drop(submission.assignment)
-        result = _error(submission, notebook, exc)
+        result = engine_error(submission, notebook, exc)
         write_result(out, result)
     write_feedback(out, result, title=title)
     return result, str(out.relative_to(storage.root))
 
 
-def _error(submission: Submission, notebook: Path, exc: BaseException) -> SubmissionResult:
+def engine_error(submission: Submission, notebook: Path, exc: BaseException) -> SubmissionResult:
+    """The "error" result of ``submission`` when the engine failed on it (retried, never a zero)."""
     try:
         found = load_assignment(submission.assignment)
         return error_result(found, notebook, submission.user_id, exc)
@@ -109,6 +110,15 @@ def _error(submission: Submission, notebook: Path, exc: BaseException) -> Submis
                                 assignment=submission.assignment, key="", sha256=submission.sha256,
                                 outcome="error", output=f"The grader failed: {exc}", tests=(),
                                 execution_time=0.0, seed=0)
+
+
+def load_submission(factory: Any, job: jobqueue.Claimed) -> Submission:
+    """The claimed job's submission, detached from its session."""
+    with factory() as session:
+        submission = session.get(Submission, job.submission_id)
+        assert submission is not None
+        session.expunge(submission)
+    return submission
 
 
 def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: WorkerSettings,
@@ -135,10 +145,7 @@ def worker_main(settings: WorkerSettings, stop: Any, name: str, parent: int) -> 
             if job is None:
                 stop.wait(settings.poll_seconds)
                 continue
-            with factory() as session:
-                submission = session.get(Submission, job.submission_id)
-                assert submission is not None
-                session.expunge(submission)
+            submission = load_submission(factory, job)
             halt = threading.Event()
             keeper = threading.Thread(target=_keep_lease, args=(factory, job, settings, halt),
                                       daemon=True)

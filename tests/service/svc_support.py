@@ -128,6 +128,8 @@ class Server:
     lease: float = 6.0
     port: int = field(default_factory=free_port)
     proc: subprocess.Popen[bytes] | None = None
+    #: grade on this Dask cluster (``--dask``) instead of ``jobs`` local grading processes
+    dask: str | None = None
 
     @property
     def url(self) -> str:
@@ -137,7 +139,8 @@ class Server:
         log = (self.course.parent / "serve.log").open("ab")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "autograder", "serve", str(self.course), "--port", str(self.port),
-             "--database", self.database, "--jobs", str(self.jobs), "--lease", str(self.lease)],
+             "--database", self.database, "--lease", str(self.lease),
+             *(["--dask", self.dask] if self.dask else ["--jobs", str(self.jobs)])],
             stdout=log, stderr=subprocess.STDOUT, cwd=self.course.parent, start_new_session=True)
         deadline = time.monotonic() + START_TIMEOUT
         while True:
