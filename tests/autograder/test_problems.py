@@ -143,8 +143,10 @@ def processes_named(name: str) -> list[int]:
 
 
 @pytest.fixture(scope="module")
-def user_env() -> Iterator[envs.Env]:
-    """Debian's Python in a venv of an ordinary user, numgrade installed non-editable."""
+def user_env() -> Iterator[tuple[envs.Env, Path]]:
+    """Debian's Python in a venv of an ordinary user, numgrade installed non-editable; and
+    the user's own copy of the repository (the checkout may be unreadable to the user, as
+    under root's mode-700 home or a mktemp folder)."""
     why = envs.can_switch_users()
     if why is not None:
         pytest.skip(f"the ordinary-user batch cannot run: {why}")
@@ -157,7 +159,7 @@ def user_env() -> Iterator[envs.Env]:
     install = [str(source)] + ([str(source / "reference")]
                                if (source / "reference" / "pyproject.toml").exists() else [])
     env = envs.make_venv(top / "venv", install=install, python="/usr/bin/python3", user=user)
-    yield env
+    yield env, source
     shutil.rmtree(top, ignore_errors=True)
 
 
@@ -176,7 +178,8 @@ def huge_outputs_notebook(folder: Path) -> Path:
 def batch(request: pytest.FixtureRequest,
           tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     identity = request.param
-    env_user = request.getfixturevalue("user_env") if identity == "user" else None
+    env_user, source = request.getfixturevalue("user_env") if identity == "user" else (None, ROOT)
+    hull, problems = source / "assignments" / "hull", source / "tests" / "files" / "problems"
     for path in ESCAPE_FILES:
         path.unlink(missing_ok=True)
     top = envs.shared_tempdir(f"numgrade-batch-{identity}-")
@@ -190,7 +193,7 @@ def batch(request: pytest.FixtureRequest,
     os.chmod(huge, 0o644)
 
     def grade(*paths: Path) -> subprocess.CompletedProcess[str]:
-        args = ["-m", "autograder", "grade", str(HULL), *map(str, paths), "--out", str(out),
+        args = ["-m", "autograder", "grade", str(hull), *map(str, paths), "--out", str(out),
                 "--jobs", "2", "--timeout", "8", "--call-timeout", "4", "--no-progress"]
         # TMPDIR of its own: the work directories must all be gone afterwards.
         env = dict(os.environ, SECRET_TOKEN=SECRET, TMPDIR=str(tmp))
@@ -202,11 +205,11 @@ def batch(request: pytest.FixtureRequest,
 
     keys_before, listeners = key_users(), Listeners()
     try:
-        proc = grade(PROBLEMS, huge)
+        proc = grade(problems, huge)
     finally:
         listeners.close()
     return {"out": out, "proc": proc, "accepted": listeners.accepted, "identity": identity,
-            "grade": grade, "tmp": tmp, "keys_before": keys_before,
+            "grade": grade, "tmp": tmp, "keys_before": keys_before, "problems": problems,
             "uid": None if env_user is None else pwd.getpwnam(env_user.user).pw_uid}
 
 
@@ -352,7 +355,7 @@ def test_regrading_reuses_every_result(batch: dict[str, object]) -> None:
     before = {p: p.read_text() for p in out.rglob("results.json")}
     grade = batch["grade"]
     assert callable(grade)
-    proc = grade(PROBLEMS)
+    proc = grade(batch["problems"])
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert f"reused {len(EXPECTED)}" in proc.stdout
     assert all(p.read_text() == text for p, text in before.items() if p.parent.name in EXPECTED)
