@@ -649,20 +649,27 @@ def coverable_folders(exclude: Sequence[Path], workdir: Path,
     Only folders outside every readable root (so not a forbidden library inside
     site-packages, which Landlock alone keeps out) and holding neither a readable
     root (a venv inside the repository) nor the working directory; none inside
-    another.
+    another. The warm parent computes this once (cached) before it forks.
     """
-    extra = [Path(p) for p in policy.allowed_read]
-    whole = readable_paths([], extra=extra)  # the roots before any hole is cut
-    needed = [*whole, *readable_paths(exclude, extra=extra), _resolve(workdir)]
+    work = _resolve(workdir)
     found: list[Path] = []
-    for folder in sorted({_resolve(p) for p in exclude}, key=lambda p: len(p.parts)):
-        if not folder.is_dir() or folder == Path("/") \
-                or any(folder.is_relative_to(f) for f in found) \
-                or any(folder.is_relative_to(root) for root in whole) \
-                or any(path.is_relative_to(folder) for path in needed):
-            continue
-        found.append(folder)
+    for folder in _coverable(tuple(map(str, exclude)), tuple(map(str, policy.allowed_read))):
+        if not work.is_relative_to(folder) and not any(folder.is_relative_to(f) for f in found):
+            found.append(folder)
     return tuple(found)
+
+
+@functools.lru_cache(maxsize=32)
+def _coverable(exclude: tuple[str, ...], allowed: tuple[str, ...]) -> tuple[Path, ...]:
+    """The excluded folders outside every root and holding none, shortest first."""
+    extra = [Path(p) for p in allowed]
+    whole = readable_paths([], extra=extra)  # the roots before any hole is cut
+    needed = [*whole, *readable_paths([Path(p) for p in exclude], extra=extra)]
+    return tuple(
+        folder for folder in sorted({_resolve(p) for p in exclude}, key=lambda p: len(p.parts))
+        if folder.is_dir() and folder != Path("/")
+        and not any(folder.is_relative_to(root) for root in whole)
+        and not any(path.is_relative_to(folder) for path in needed))
 
 
 def _join_cgroup(policy: IsolationPolicy, slot: int, notes: list[str]) -> None:

@@ -195,9 +195,12 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
         # libraries costs ~0.1 s, which no child should pay again.
         _apply_forbid(request)
         _APPLIED[0] = _forbid_key(request)
-    # Computed here, once, so every forked child inherits the cached list.
-    sandbox.readable_paths([Path(p) for p in request.get("exclude", [])],
+    # Computed here, once, so every forked child inherits the cached lists (a child
+    # that computed them itself would pay about half a second).
+    exclude = [Path(p) for p in request.get("exclude", [])]
+    sandbox.readable_paths(exclude,
                            extra=[Path(p) for p in request.get("policy", {}).get("allowed_read", [])])
+    sandbox.coverable_folders(exclude, Path(request["workdir"]), _policy(request["policy"]))
     pid = os.fork()
     if pid == 0:
         control.close()
