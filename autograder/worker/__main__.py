@@ -196,11 +196,10 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
         _apply_forbid(request)
         _APPLIED[0] = _forbid_key(request)
     # Computed here, once, so every forked child inherits the cached lists (a child
-    # that computed them itself would pay about half a second).
-    exclude = [Path(p) for p in request.get("exclude", [])]
-    sandbox.readable_paths(exclude,
-                           extra=[Path(p) for p in request.get("policy", {}).get("allowed_read", [])])
-    sandbox.coverable_folders(exclude, Path(request["workdir"]), _policy(request["policy"]))
+    # that computed them itself would pay about half a second): the folders to cover
+    # are found from the readable paths, which this fills the cache with too.
+    sandbox.coverable_folders([Path(p) for p in request.get("exclude", [])],
+                              Path(request["workdir"]), _policy(request["policy"]))
     pid = os.fork()
     if pid == 0:
         control.close()
