@@ -8,6 +8,7 @@ the result's files itself (same machine, same file system).
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.util
 import os
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -31,6 +32,10 @@ def _init_slot(assignment_root: str, options: GradingOptions, counter: Any) -> N
         slot = counter.value
         counter.value += 1
     _GRADER = Grader(load_assignment(Path(assignment_root)), options, slot=slot)
+    # A pool process ends through os._exit, which skips atexit: multiprocessing's own
+    # exit finalizers are what run there. Without this the slot's warm worker and its
+    # home folder (``autograder-slot-*``) outlived every ``--jobs N`` run.
+    multiprocessing.util.Finalize(_GRADER, _GRADER.close, exitpriority=10)
 
 
 def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
