@@ -5,6 +5,10 @@ IPython; see ``tests/support/envs.py``), grades the model solution and one wrong
 answer through the installed ``autograder`` command, and compares every check's
 score with the developer's install. A sandbox that cannot read what Python needs
 must show up here as a failure, never as a 0 for the student.
+
+The installs are most of this module's time and each is one core's work, so they
+are made two at a time in the background from the first test on (:func:`installs`);
+each test waits for its own and then grades as before.
 """
 
 from __future__ import annotations
@@ -14,8 +18,11 @@ import os
 import shutil
 import subprocess
 import sys
+import threading
 import zipfile
+from concurrent.futures import Future
 from pathlib import Path
+from typing import Any, Callable, Iterator
 
 import pytest
 
@@ -97,24 +104,115 @@ def grade_with(env: envs.Env, assignment: str, folder: Path, *, cwd: Path) -> di
     return scores(out)
 
 
-def test_venv_inside_the_repository(repo: Path, cache: Path,
+class Installs:
+    """The layouts' installs, made two at a time in the background.
+
+    Two chains of steps, each step a :class:`Future`: installs that write into the
+    same checkout (an editable install and a build of it write ``*.egg-info`` there)
+    run one after the other in one chain; a failed step fails only its own future.
+    """
+
+    def __init__(self, chains: list[list[tuple[str, Callable[[], Any]]]]) -> None:
+        self.futures: dict[str, Future[Any]] = {
+            name: Future() for chain in chains for name, _ in chain}
+        self.threads = [threading.Thread(target=self._run, args=(chain,), daemon=True)
+                        for chain in chains]
+        for thread in self.threads:
+            thread.start()
+
+    def _run(self, chain: list[tuple[str, Callable[[], Any]]]) -> None:
+        for name, step in chain:
+            future = self.futures[name]
+            future.set_running_or_notify_cancel()
+            try:
+                future.set_result(step())
+            except BaseException as exc:  # reported by the test that waits for it
+                future.set_exception(exc)
+
+    def get(self, name: str) -> Any:
+        return self.futures[name].result(timeout=2 * envs.INSTALL_TIMEOUT)
+
+
+def _ordinary_user_install(workspace: Path, cache: Path) -> tuple[envs.Env, Path] | str:
+    """The ordinary user's ``pip install .`` from a copy of their own; a skip reason if none."""
+    debian = Path("/usr/bin/python3")
+    if envs.can_switch_users() is None and debian.exists():
+        user = envs.ordinary_user()
+        venv = Path(envs.home(user)) / "numgrade-venv"
+        python = str(debian)
+        # A cache of its own: root's installs write into the shared one at the same time.
+        cache = workspace / "pip-cache-user"
+        cache.mkdir()
+        shutil.chown(cache, user, user)
+        source = envs.give_to(user, envs.copy_repository(workspace / "user-src"))
+    elif os.geteuid() != 0:
+        user, venv, python = None, workspace / "venv-wheel", sys.executable
+        source = envs.copy_repository(workspace / "user-src")
+    else:
+        return f"ordinary-user layout not tested: {envs.can_switch_users() or 'no /usr/bin/python3'}"
+    if venv.exists():
+        shutil.rmtree(venv)
+    env = envs.make_venv(venv, install=[str(source), str(source / "reference")], python=python,
+                         user=user, cache=cache)
+    return env, source
+
+
+def _gradescope_install(workspace: Path, cache: Path) -> tuple[Path, dict[str, str], list[str]]:
+    """The zip from ``autograder gradescope``, unpacked and set up by its own ``setup.sh``."""
+    root = workspace / "gradescope"
+    proc = subprocess.run([sys.executable, "-m", "autograder", "gradescope", "hull", "--out",
+                           str(workspace)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    with zipfile.ZipFile(workspace / "hull-gradescope.zip") as archive:
+        names = archive.namelist()
+        archive.extractall(root / "source")
+    for script in ("setup.sh", "run_autograder"):
+        (root / "source" / script).chmod(0o755)
+    env = {"AUTOGRADER_ROOT": str(root), "PIP_CACHE_DIR": str(cache)}
+    setup = subprocess.run(["bash", str(root / "source" / "setup.sh")], capture_output=True,
+                           text=True, timeout=envs.INSTALL_TIMEOUT,
+                           env={**os.environ, **env}, cwd=root / "source")
+    assert setup.returncode == 0, setup.stdout[-3000:] + setup.stderr[-3000:]
+    return root, env, names
+
+
+@pytest.fixture(scope="module")
+def installs(repo: Path, workspace: Path, cache: Path) -> Iterator[Installs]:
+    """Every layout's install, started when the first test of the module asks."""
+    student = workspace / "student"
+    chains: list[list[tuple[str, Callable[[], Any]]]] = [[
+        ("inside", lambda: envs.make_venv(
+            repo / ".venv", install=["-e", str(repo), "-e", str(repo / "reference")], cache=cache)),
+        ("beside", lambda: envs.make_venv(
+            workspace / "venv-beside", stack=False, system_site=True, cache=cache,
+            install=["--no-deps", "-e", str(repo), "-e", str(repo / "reference")])),
+        ("student", lambda: envs.make_venv(student / "venv", install=[str(repo)], cache=cache)),
+    ], [
+        ("user", lambda: _ordinary_user_install(workspace, cache)),
+        ("gradescope", lambda: _gradescope_install(workspace, cache)),
+    ]]
+    made = Installs(chains)
+    yield made
+    for thread in made.threads:
+        thread.join(timeout=2 * envs.INSTALL_TIMEOUT)
+
+
+def test_venv_inside_the_repository(repo: Path, installs: Installs,
                                     expected: dict[str, dict[str, float]]) -> None:
     """``python -m venv .venv`` in the checkout, numpy and the rest inside it."""
-    env = envs.make_venv(repo / ".venv", install=["-e", str(repo), "-e", str(repo / "reference")],
-                         cache=cache)
+    env = installs.get("inside")
     assert grade_with(env, "hull", repo / "class", cwd=repo) == expected
 
 
-def test_venv_beside_the_repository(repo: Path, workspace: Path, cache: Path,
+def test_venv_beside_the_repository(workspace: Path, installs: Installs,
                                     expected: dict[str, dict[str, float]]) -> None:
     """A venv next to the checkout (the libraries from the base Python: only the place differs)."""
-    env = envs.make_venv(workspace / "venv-beside", stack=False, system_site=True, cache=cache,
-                         install=["--no-deps", "-e", str(repo), "-e", str(repo / "reference")])
+    env = installs.get("beside")
     assert grade_with(env, "hull", workspace / "beside", cwd=workspace) == expected
 
 
-def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, workspace: Path,
-                                                              cache: Path) -> None:
+def test_student_checks_in_a_release_folder_beside_their_venv(workspace: Path,
+                                                              installs: Installs) -> None:
     """The student's install (no model solutions) next to the released folder."""
     course = workspace / "student"
     released = course / "hull"
@@ -122,7 +220,7 @@ def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, worksp
                            str(released)], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     shutil.copy(EXAMPLES / "solution.ipynb", released / "hull.ipynb")
-    env = envs.make_venv(course / "venv", install=[str(repo)], cache=cache)
+    env = installs.get("student")
     probe = env.run("python", "-c", "import reference", cwd=course)
     assert probe.returncode != 0, "the student's install must not contain the model solutions"
     proc = env.run("autograder", "check", "hull/hull.ipynb", cwd=course)
@@ -131,25 +229,12 @@ def test_student_checks_in_a_release_folder_beside_their_venv(repo: Path, worksp
 
 
 def test_gradescope_zip_installed_by_its_own_setup_script(
-        workspace: Path, cache: Path, expected: dict[str, dict[str, float]]) -> None:
+        installs: Installs, expected: dict[str, dict[str, float]]) -> None:
     """setup.sh and run_autograder exactly as Gradescope runs them, under a fake /autograder."""
-    root = workspace / "gradescope"
-    proc = subprocess.run([sys.executable, "-m", "autograder", "gradescope", "hull", "--out",
-                           str(workspace)], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    with zipfile.ZipFile(workspace / "hull-gradescope.zip") as archive:
-        names = archive.namelist()
-        archive.extractall(root / "source")
+    root, env, names = installs.get("gradescope")
     assert "assignment/hull/hull.ipynb" in names
     bundled = (root / "source" / "assignment" / "hull" / "hull.ipynb").read_text()
     assert "### BEGIN SOLUTION" not in bundled, "the zip must not hold the instructor notebook"
-    for script in ("setup.sh", "run_autograder"):
-        (root / "source" / script).chmod(0o755)
-    env = {"AUTOGRADER_ROOT": str(root), "PIP_CACHE_DIR": str(cache)}
-    setup = subprocess.run(["bash", str(root / "source" / "setup.sh")], capture_output=True,
-                           text=True, timeout=envs.INSTALL_TIMEOUT,
-                           env={**os.environ, **env}, cwd=root / "source")
-    assert setup.returncode == 0, setup.stdout[-3000:] + setup.stderr[-3000:]
     for name in GRADED:
         (root / "submission").mkdir(parents=True, exist_ok=True)
         for old in (root / "submission").iterdir():
@@ -164,32 +249,17 @@ def test_gradescope_zip_installed_by_its_own_setup_script(
 
 
 def test_ordinary_user_installed_package_assignment_outside(
-        repo: Path, workspace: Path, cache: Path, expected: dict[str, dict[str, float]]) -> None:
+        repo: Path, workspace: Path, installs: Installs, expected: dict[str, dict[str, float]]) -> None:
     """``pip install .`` (not editable) by an ordinary user with Debian's Python 3.11, the
     assignment folder given by its path, outside any checkout.
 
     Run as root, the test creates the user; otherwise it runs as the current user
     (still not root) with this interpreter.
     """
-    debian = Path("/usr/bin/python3")
-    user = None
-    if envs.can_switch_users() is None and debian.exists():
-        user = envs.ordinary_user()
-        venv = Path(envs.home(user)) / "numgrade-venv"
-        python = str(debian)
-    elif os.geteuid() != 0:
-        venv, python = workspace / "venv-wheel", sys.executable
-    else:
-        pytest.skip(f"ordinary-user layout not tested: {envs.can_switch_users() or 'no /usr/bin/python3'}")
-    if venv.exists():
-        shutil.rmtree(venv)
-    subprocess.run(["chmod", "-R", "a+rwX", str(cache)], check=False)  # root filled it so far
-    source = repo
-    if user is not None:  # the user builds from a copy of their own (pip writes egg-info there)
-        source = envs.copy_repository(workspace / "user-src")
-        envs.give_to(user, source)
-    env = envs.make_venv(venv, install=[str(source), str(source / "reference")], python=python,
-                         user=user, cache=cache)
+    made = installs.get("user")
+    if isinstance(made, str):
+        pytest.skip(made)
+    env, _ = made
     probe = env.run("python", "-c", "import os, autograder; print(os.geteuid(), autograder.__file__)",
                     cwd=workspace)
     assert probe.returncode == 0 and not probe.stdout.startswith("0 "), probe.stdout + probe.stderr
