@@ -118,6 +118,81 @@ def test_expect_close_complex_and_integer_inputs():
 
 
 # ---------------------------------------------------------------------------
+# expect_close: where, array tolerances, hints
+# ---------------------------------------------------------------------------
+
+def test_expect_close_at_names_the_place_of_the_worst_entry():
+    t = np.array([0.0, 0.5, 1.0])
+    message = failure(expect_close, [0.0, 0.7, 1.0 + 1e-9], [0.0, 0.5, 1.0], rtol=0, atol=1e-6,
+                      name="p(t)", at=lambda i: f"t = {show_number(t[i])}")
+    assert message == ("p(t) is off at t = 0.5: expected 0.5, got 0.7 (error 2.00e-01, allowed "
+                       "1.00e-06); 1 of 3 value(s) are outside the tolerance.")
+
+
+def test_expect_close_at_receives_the_full_index():
+    seen = []
+
+    def at(index):
+        seen.append(index)
+        return f"row {index[0]}, column {index[1]}"
+
+    message = failure(expect_close, np.eye(2) * 2, np.eye(2), rtol=1e-9, atol=0, at=at)
+    assert "is off at row 0, column 0: expected 1, got 2" in message
+    assert seen == [(0, 0)]
+    assert "at a scalar" in failure(expect_close, 2.0, 1.0, rtol=0, atol=0,
+                                    at=lambda i: "a scalar" if i == () else "?")
+
+
+@pytest.mark.parametrize(("got", "expected", "words"), [
+    ([1.0, NAN], [1.0, 2.0], "has NaN at node 1 where 2 was expected"),
+    ([1.0, -INF], [1.0, INF], "has -inf at node 1 where +inf was expected"),
+    ([1.0, 5.0], [1.0, NAN], "has 5 at node 1 where NaN was expected"),
+])
+def test_expect_close_at_also_names_non_finite_places(got, expected, words):
+    message = failure(expect_close, got, expected, rtol=0, atol=1, at=lambda i: f"node {i[0]}",
+                      hint="Check the nodes.")
+    assert words in message and message.endswith(". Check the nodes.")
+
+
+def test_expect_close_array_atol_is_a_tolerance_per_entry():
+    want = np.array([[1.0, 100.0], [2.0, 200.0]])
+    per_column = np.array([1e-6, 1e-3])
+    expect_close(want + [[5e-7, 5e-4], [-5e-7, -5e-4]], want, rtol=0, atol=per_column)
+    message = failure(expect_close, want + [[0, 0], [2e-6, 5e-4]], want, rtol=0, atol=per_column)
+    assert "off at index [1, 0]" in message and "allowed 1.00e-06" in message
+    # the worst entry relative to its own bound is named, not the largest error
+    message = failure(expect_close, want + [[0, 9e-4], [2e-6, 0]], want, rtol=0,
+                      atol=per_column)
+    assert "off at index [1, 0]" in message
+
+
+def test_expect_close_array_rtol_and_infinite_expected_entries():
+    expect_close([INF, 1.0 + 1e-10], [INF, 1.0], rtol=[0, 1e-9], atol=0)
+    assert "off at index [1]" in failure(expect_close, [INF, 1.1], [INF, 1.0], rtol=[0, 1e-9],
+                                         atol=0)
+
+
+@pytest.mark.parametrize(("rtol", "atol", "words"), [
+    (0, [1e-9, 1e-9, 1e-9], "`atol` must be a number or an array that broadcasts"),
+    (0, -1e-9, "`atol` must be finite and >= 0"),
+    (0, NAN, "`atol` must be finite and >= 0"),
+    ([NAN, 0], 0, "`rtol` must be finite and >= 0"),
+    ("big", 0, "`rtol` must be a number or an array"),
+])
+def test_expect_close_refuses_bad_tolerances(rtol, atol, words):
+    with pytest.raises(ValueError, match=words.replace("(", r"\(")):
+        expect_close([1.0, 2.0], [1.0, 2.0], rtol=rtol, atol=atol)
+
+
+def test_expect_close_hint_ends_shape_and_value_failures():
+    hint = "Return one value per t."
+    assert failure(expect_close, [1.0], [1.0, 2.0], rtol=0, atol=0, hint=hint).endswith(hint)
+    assert failure(expect_close, [1.0, 3.0], [1.0, 2.0], rtol=0, atol=0, hint=hint).endswith(
+        "outside the tolerance. " + hint)
+    expect_close([1.0, 2.0], [1.0, 2.0], rtol=0, atol=0, hint=hint)
+
+
+# ---------------------------------------------------------------------------
 # staging: type, then shape, then values
 # ---------------------------------------------------------------------------
 
