@@ -29,6 +29,7 @@ from autograder.checks import (
     call_for_figure,
     describe,
     expect_array,
+    expect_close,
     explain_errors,
     sentences,
     show_number,
@@ -125,25 +126,24 @@ def judge_nodes(got: object, expected: np.ndarray, *, call: str, what: str, cred
         raise CheckFailure(f"{call} returned {arr.size} nodes; degree n = {m - 1} needs "
                            f"n + 1 = {m} nodes.{hint}")
     arr = arr.astype(float)
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise CheckFailure(f"{call}: node {bad[0]} is {arr[bad[0]]}; every node must be a "
-                           "finite number in [-1, 1].")
-    if _close(arr, expected, NODE_ATOL):
-        return
-    if m > 1 and _close(arr, expected[::-1], NODE_ATOL):
-        fix = " (x_j = -cos(j pi / n) rises from -1 to 1; cos(j pi / n) falls)" \
-            if "Chebyshev" in what else ""
-        CONVENTIONS.partial(credit, "descending",
-                            f"{call}: your {what} are in descending order; the assignment "
-                            f"asks for ascending{fix}.")
-    for message, wrong in (known or {}).items():
-        if _close(arr, np.asarray(wrong, dtype=float), NODE_ATOL):
-            raise CheckFailure(f"{call}: {message}")
-    raise CheckFailure(_nodes_mismatch(arr, expected, call=call))
+    try:
+        expect_close(arr, expected, rtol=0, atol=NODE_ATOL, name=call,
+                     at=lambda i: f"node {i[0]}", hint=_node_hints(arr, expected))
+    except CheckFailure:
+        if m > 1 and _close(arr, expected[::-1], NODE_ATOL):
+            fix = " (x_j = -cos(j pi / n) rises from -1 to 1; cos(j pi / n) falls)" \
+                if "Chebyshev" in what else ""
+            CONVENTIONS.partial(credit, "descending",
+                                f"{call}: your {what} are in descending order; the assignment "
+                                f"asks for ascending{fix}.")
+        for message, wrong in (known or {}).items():
+            if _close(arr, np.asarray(wrong, dtype=float), NODE_ATOL):
+                raise CheckFailure(f"{call}: {message}") from None
+        raise
 
 
-def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
+def _node_hints(arr: np.ndarray, expected: np.ndarray) -> str:
+    """What is wrong with the nodes as a whole: their range, their order."""
     parts: list[str] = []
     if abs(arr[0] - expected[0]) > NODE_ATOL or abs(arr[-1] - expected[-1]) > NODE_ATOL:
         parts.append(f"the nodes should run from {show_number(expected[0])} to "
@@ -154,12 +154,7 @@ def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
         j = int(steps[0])
         parts.append(f"the nodes must be ascending, but node {j + 1} ({show_number(arr[j + 1])}) "
                      f"is not larger than node {j} ({show_number(arr[j])})")
-    err = np.abs(arr - expected)
-    j = int(np.argmax(err))
-    parts.append(f"node {j} is {show_number(arr[j])}, expected {show_number(expected[j])} (error "
-                 f"{err[j]:.2e}, allowed {NODE_ATOL:.0e}); {int((err > NODE_ATOL).sum())} of "
-                 f"{arr.size} nodes are off")
-    return f"{call}: " + "; ".join(parts) + "."
+    return sentences(parts)
 
 
 # ---------------------------------------------------------------------------
@@ -194,28 +189,27 @@ def judge_weights(got: object, expected: np.ndarray, *, call: str, n: int, hint:
                            f"but weight {k} is the largest in exact arithmetic. Scale the "
                            f"weights so that the largest is about 1. {hint}")
     ratio, want = arr / arr[k], expected / expected[k]
-    err = np.abs(ratio - want)
-    over = err > WEIGHT_RTOL * np.abs(want) + WEIGHT_ATOL
-    if not over.any():
-        return
-    for message, wrong in (known or {}).items():
-        wrong = np.asarray(wrong, dtype=float)
-        if np.allclose(ratio, wrong / wrong[k], rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL):
-            raise CheckFailure(f"{call}: {message}")
-    flipped = np.flatnonzero((ratio != 0) & (np.abs(want) > WEIGHT_ATOL)
-                             & (np.sign(ratio) != np.sign(want)))
-    if flipped.size:
-        j = int(flipped[0])
-        raise CheckFailure(f"{call}: weight {j} has the wrong sign: the weights alternate in "
-                           f"sign, w_j = (-1)^j |w_j| (a common factor, even -1, is fine); "
-                           f"{flipped.size} of {m} weights have the wrong sign.")
-    j = int(np.flatnonzero(over)[0])
-    zero = (f" It is 0: it underflowed although its true size, {want[j]:.3g} times the "
-            f"largest, is a normal double." if ratio[j] == 0 else "")
-    raise CheckFailure(
-        f"{call}: weight {j} divided by weight {k} (the largest) should be "
-        f"{want[j]:.12g}; yours is {ratio[j]:.12g}. Only ratios matter (any common scale "
-        f"is fine); {int(over.sum())} of {m} ratios are off.{zero}")
+    under = np.flatnonzero((ratio == 0) & (np.abs(want) > WEIGHT_ATOL))
+    zero = (f"Weight {under[0]} is 0: it underflowed although its true size, "
+            f"{want[under[0]]:.3g} times the largest, is a normal double." if under.size else "")
+    try:
+        expect_close(ratio, want, rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL,
+                     name=f"{call} divided by weight {k} (the largest)",
+                     at=lambda i: f"weight {i[0]}",
+                     hint=sentences(["only ratios matter (any common scale is fine)", zero]))
+    except CheckFailure:
+        for message, wrong in (known or {}).items():
+            wrong = np.asarray(wrong, dtype=float)
+            if np.allclose(ratio, wrong / wrong[k], rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL):
+                raise CheckFailure(f"{call}: {message}") from None
+        flipped = np.flatnonzero((ratio != 0) & (np.abs(want) > WEIGHT_ATOL)
+                                 & (np.sign(ratio) != np.sign(want)))
+        if flipped.size:
+            raise CheckFailure(f"{call}: weight {flipped[0]} has the wrong sign: the weights "
+                               f"alternate in sign, w_j = (-1)^j |w_j| (a common factor, even "
+                               f"-1, is fine); {flipped.size} of {m} weights have the wrong "
+                               "sign.") from None
+        raise
 
 
 # ---------------------------------------------------------------------------
@@ -277,22 +271,19 @@ def judge_values(got: object, expected: ArrayLike, *, t: ArrayLike, nodes: np.nd
         raise CheckFailure(f"{call} returned {flat[i]} at {_where(tt[i], nodes)} (entry {i}); "
                            f"expected {want[i]:.15g}. {bad.size} of {flat.size} values are not "
                            "finite." + _nan_hint(tt[i], nodes))
-    err = np.abs(flat - want)
-    if np.all(err <= tol):
-        return
-    c = scale_factor(flat, want, ~np.isin(tt, nodes))
-    if c is not None:
-        CONVENTIONS.partial(credit, "first-form",
-                            f"{call}: every value is {c:.6g} times the interpolant. That is "
-                            "what the first barycentric form l(t) sum_j w_j f_j / (t - x_j) "
-                            "gives when the weights come at another scale. The weights may "
-                            "have any common scale: divide by sum_j w_j / (t - x_j) (the "
-                            "second form), and the scale cancels.")
-    i = int(np.argmax(err))
-    raise CheckFailure(f"{call} is off at {_where(tt[i], nodes)} (entry {i}): expected "
-                       f"{want[i]:.15g}, got {flat[i]:.15g} (error {err[i]:.2e}, allowed "
-                       f"{tol:.2e}); {int((err > tol).sum())} of {flat.size} values are outside "
-                       "the tolerance.")
+    try:
+        expect_close(flat, want, rtol=0, atol=tol, name=call,
+                     at=lambda i: f"{_where(tt[i[0]], nodes)} (entry {i[0]})")
+    except CheckFailure:
+        c = scale_factor(flat, want, ~np.isin(tt, nodes))
+        if c is not None:
+            CONVENTIONS.partial(credit, "first-form",
+                                f"{call}: every value is {c:.6g} times the interpolant. That is "
+                                "what the first barycentric form l(t) sum_j w_j f_j / (t - x_j) "
+                                "gives when the weights come at another scale. The weights may "
+                                "have any common scale: divide by sum_j w_j / (t - x_j) (the "
+                                "second form), and the scale cancels.")
+        raise
 
 
 def _nan_hint(t: float, nodes: np.ndarray) -> str:

@@ -33,6 +33,7 @@ from autograder.checks import (
     FigureData,
     describe,
     expect_array,
+    expect_close,
     is_figure,
     show_number,
     side_by_side,
@@ -134,11 +135,15 @@ def finish(reading: Reading, credit: Credit) -> None:
         CONVENTIONS.partial(credit, "layout", reading.convention)
 
 
-def _with_convention(message: str, reading: Reading) -> str:
+def _convention_note(reading: Reading) -> str:
     if reading.convention is None:
-        return message
-    return message + f" (Note: your array was read as rows [a, b, c, d] after reordering: " \
-                     f"{reading.convention}.)"
+        return ""
+    return f"(Note: your array was read as rows [a, b, c, d] after reordering: " \
+           f"{reading.convention}.)"
+
+
+def _with_convention(message: str, reading: Reading) -> str:
+    return f"{message} {_convention_note(reading)}".rstrip()
 
 
 # ---------------------------------------------------------------------------
@@ -239,16 +244,11 @@ def check_natural_ends(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: flo
 
 def check_values(reading: Reading, expected: np.ndarray, rtol: float) -> None:
     """Each coefficient within ``rtol * (|expected| + largest |expected| in its column)``."""
-    got, want = reading.rows, np.asarray(expected, dtype=float)
-    bound = rtol * (np.abs(want) + np.max(np.abs(want), axis=0))
-    err = np.abs(got - want)
-    if np.any(err > bound):
-        i, k = (int(v) for v in np.unravel_index(np.argmax(err - bound), err.shape))
-        raise CheckFailure(_with_convention(
-            f"{NAME}: coefficient {'abcd'[k]} of piece {i} (row {i}, column {k}) should be "
-            f"{want[i, k]:.10g}; got {got[i, k]:.10g} (error {err[i, k]:.1e}, allowed "
-            f"{bound[i, k]:.1e}). {int((err > bound).sum())} of {err.size} coefficients are "
-            "outside the tolerance.", reading))
+    want = np.asarray(expected, dtype=float)
+    expect_close(reading.rows, want, rtol=rtol, atol=rtol * np.max(np.abs(want), axis=0),
+                 name=NAME, at=lambda i: f"coefficient {'abcd'[i[1]]} of piece {i[0]} "
+                                         f"(row {i[0]}, column {i[1]})",
+                 hint=_convention_note(reading))
 
 
 def grade_coefficients(got: object, x: np.ndarray, y: np.ndarray, expected: np.ndarray,
@@ -294,26 +294,23 @@ def grade_eval(got: object, x: np.ndarray, t: np.ndarray, expected: np.ndarray, 
     if arr.shape != want.shape:
         raise CheckFailure(f"{name} should return one value per entry of t, an array of shape "
                            f"{want.shape}; got {describe(got)}.")
-    arr = arr.astype(float)
-    scale = float(np.max(np.abs(want))) or 1.0
-    bound = rtol * (np.abs(want) + scale)
-    err = np.where(np.isfinite(arr), np.abs(arr - want), np.inf)
-    if not np.any(err > bound):
-        return
-    if retry_reversed is not None:
-        again = np.asarray(retry_reversed(), dtype=float)
-        if again.shape == want.shape and np.all(np.abs(again - want) <= bound):
-            CONVENTIONS.partial(credit, "eval-order",
-                                "Your spline_eval reads each row of coeffs as [d, c, b, a] "
-                                "(SciPy's order); the assignment's rows are [a, b, c, d], with "
-                                "S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + d (t - x_i)^3.")
-    k = int(np.argmax(err - bound))
-    raise CheckFailure(
-        f"{name} at t = {show_number(t.flat[k], DIGITS)}, {where_is(float(t.flat[k]), x)}, "
-        "should be "
-        f"{want.flat[k]:.10g}; got {arr.flat[k]:.10g}. {int((err > bound).sum())} of "
-        f"{err.size} values are off. Find the piece i with x[i] <= t < x[i+1] and evaluate "
-        "a + b u + c u^2 + d u^3 with u = t - x[i] (not t).")
+    atol = rtol * (float(np.max(np.abs(want))) or 1.0)
+    try:
+        expect_close(arr, want, rtol=rtol, atol=atol, name=name,
+                     at=lambda i: f"t = {show_number(t[i], DIGITS)}, {where_is(float(t[i]), x)}",
+                     hint="Find the piece i with x[i] <= t < x[i+1] and evaluate "
+                          "a + b u + c u^2 + d u^3 with u = t - x[i] (not t).")
+    except CheckFailure:
+        if retry_reversed is not None:
+            again = np.asarray(retry_reversed(), dtype=float)
+            if again.shape == want.shape and np.all(np.abs(again - want)
+                                                    <= atol + rtol * np.abs(want)):
+                CONVENTIONS.partial(credit, "eval-order",
+                                    "Your spline_eval reads each row of coeffs as [d, c, b, a] "
+                                    "(SciPy's order); the assignment's rows are [a, b, c, d], "
+                                    "with S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + "
+                                    "d (t - x_i)^3.")
+        raise
 
 
 # ---------------------------------------------------------------------------
