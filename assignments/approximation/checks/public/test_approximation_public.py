@@ -14,7 +14,7 @@ import pytest
 
 import approximation_feedback as fb  # checks/public/: on sys.path while checks run
 from autograder.callbacks import traced
-from autograder.checks import Credit, Student, expect_array, expect_close
+from autograder.checks import Credit, Student, expect_array, expect_close, over_datasets
 
 NODES = {
     "chebyshev-4": (4, "chebyshev", [-1.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5), 1.0]),
@@ -22,8 +22,7 @@ NODES = {
 }
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", list(NODES))
+@over_datasets(NODES, points=1)
 def test_nodes(student: Student, name: str) -> None:
     n, kind, expected = NODES[name]
     expect_close(student.interpolation_nodes(n, kind), expected, rtol=0, atol=1e-14,

@@ -214,8 +214,7 @@ def _looks_like(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, reading: j
     return ""
 
 
-@pytest.mark.points(2)
-@pytest.mark.parametrize("name", list(FUNCTIONS))
+@over_datasets(FUNCTIONS, points=2)
 def test_convergence(student: Student, credit: Credit, name: str) -> None:
     f, a, b = FUNCTIONS[name]
     margin = INTERIOR * (b - a)
