@@ -86,6 +86,25 @@ EQUISPACED_HINT = (
 CHEBYSHEV_HINT = ("Chebyshev weights need no large numbers: w_j = (-1)^j, halved for j = 0 "
                   "and j = n.")
 
+#: Known wrong answers, named (public and hidden checks compare with them).
+FIRST_KIND = ("these are Chebyshev points of the first kind (the roots of T_{n+1}), which "
+              "stop short of -1 and 1; the assignment asks for the second kind, "
+              "x_j = -cos(j pi / n), j = 0, ..., n.")
+NOT_HALVED = ("the end weights must be halved: w_j = (-1)^j for 0 < j < n, and "
+              "w_0 = 1/2, w_n = (-1)^n / 2.")
+CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equispaced nodes "
+                            "need w_j = (-1)^j C(n, j).")
+
+
+def alternating(n: int) -> np.ndarray:
+    """``(-1)^j`` for j = 0, ..., n: Chebyshev weights that forgot to halve the ends."""
+    return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
+
+
+def runge(x: ArrayLike) -> np.ndarray:
+    """Runge's function of the notebook, 1 / (1 + 16 x^2)."""
+    return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
+
 
 # ---------------------------------------------------------------------------
 # calling the student
@@ -357,6 +376,25 @@ def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[Figur
         return figure, "", call
     return figure, (f"{call} returned {describe(value)}, not the Figure; it drew one, so I "
                     "graded that, but end plot_runge with `return fig`."), call
+
+
+def grade_runge_plot(student: Student, feedback: Feedback, credit: Credit, n: int,
+                     interpolant: Callable[[str, int], Callable[[np.ndarray], ArrayLike]]) -> None:
+    """Call ``plot_runge(n)`` and find Runge's function and its two interpolants of degree n.
+
+    ``interpolant(family, m)`` is the interpolant of degree ``m`` in the
+    ``"equispaced"`` or ``"Chebyshev"`` nodes; those of degree n - 1 and n + 1
+    only sharpen the message (a common off-by-one).
+    """
+    figure, note, call = draw_runge_plot(student, feedback, n)
+    families = ("equispaced", "Chebyshev")
+    wanted = [Curve("Runge's function 1/(1 + 16x^2)", runge)]
+    wanted += [Curve(f"the {family} interpolant", interpolant(family, n)) for family in families]
+    nearby = {f"the {family} interpolant": [
+        Curve(f"the {family} interpolant of degree {m} ({m + 1} nodes), but {call} asks for "
+              f"degree {n} ({n + 1} nodes)", interpolant(family, m)) for m in (n - 1, n + 1)]
+        for family in families}
+    judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit, note=note)
 
 
 def drawn_curves(figure: FigureData) -> list[tuple[np.ndarray, np.ndarray]]:
