@@ -24,6 +24,8 @@ An assignment's checks are ordinary pytest functions over the fixtures of
   ``0.9999999`` never reads as ``1``), :func:`show_point`, :func:`show_list`,
   :func:`show_points`, :func:`plural`, :func:`sentence`, :func:`sentences`;
 * pictures: :func:`is_figure` (figure data from the boundary),
+  :func:`curve_pieces` and :func:`curve_points` (what a figure draws, piece by
+  piece or as one point set),
   :func:`figure_png` (the PNG inside figure data), :func:`render_png` (a
   figure drawn by the check) and :func:`side_by_side` (the student's picture
   beside a reference drawing).
@@ -74,7 +76,7 @@ from autograder.compare import (
     is_rotation_reversed,
     same_cycle,
 )
-from autograder.curves import decode_png, render_side_by_side
+from autograder.curves import curve_pieces, curve_points, decode_png, render_side_by_side
 from autograder.errors import CheckFailure, StudentException
 from autograder.plugin import Credit, Feedback
 from autograder.proxy import Student
@@ -89,6 +91,8 @@ __all__ = [
     "FigureData",
     "Student",
     "call_for_figure",
+    "curve_pieces",
+    "curve_points",
     "decode_png",
     "describe",
     "expect_array",

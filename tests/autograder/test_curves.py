@@ -12,6 +12,7 @@ import pytest
 
 from autograder.curves import (
     CurveDistance,
+    curve_pieces,
     curve_points,
     hausdorff,
     relative_curve_distance,
@@ -79,6 +80,24 @@ def test_collections_and_patches():
     got = {tuple(p) for p in pts.tolist()}
     assert {(7, 9), (8, 10), (0.5, 0.5), (2.5, 2.5), (0.5, 0), (1, 0.5)} <= got
     assert len(pts) == 2 + (2 + 1) * 2 + (4 + 3)
+
+
+def test_curve_pieces_keeps_each_drawn_piece_apart():
+    scatter = {"kind": "PathCollection", "offsets": np.array([[7.0, 9.0], [np.nan, 1.0]]),
+               "segments": [np.array([[0.0, 0.0], [1.0, 1.0]])], "array": None}
+    pieces = curve_pieces(figure([line([0, 1, np.nan, 3], [0, 1, 2, 3]),
+                                  line([5], [5], linestyle="None")], collections=[scatter]))
+    # polylines first (the line, the collection's segment), then point sets (markers, offsets)
+    assert [p.tolist() for p in pieces] == [[[0, 0], [1, 1], [3, 3]], [[0, 0], [1, 1]],
+                                            [[5, 5]], [[7, 9]]]
+
+
+def test_figure_data_holding_garbage_gives_no_points():
+    bad = figure([{"x": "abc", "y": [1, 2]}, {"x": None, "y": None}, line([0, 1], [0, 1])])
+    assert curve_points(bad, samples_per_segment=1).tolist() == [[0, 0], [1, 1]]
+    assert [len(p) for p in curve_pieces(bad)] == [0, 0, 2]
+    with pytest.raises(ValueError, match="figure data"):
+        curve_pieces({"lines": []})
 
 
 def test_every_axes_is_read_and_empty_figures_give_no_points():

@@ -27,6 +27,7 @@ from autograder.checks import (
     FigureData,
     Student,
     call_for_figure,
+    curve_pieces,
     describe,
     expect_array,
     expect_close,
@@ -399,26 +400,8 @@ def grade_runge_plot(student: Student, feedback: Feedback, credit: Credit, n: in
 
 def drawn_curves(figure: FigureData) -> list[tuple[np.ndarray, np.ndarray]]:
     """(x, y) of every line or point set with ``MIN_CURVE_POINTS`` finite points at distinct x."""
-    pieces: list[tuple[object, object]] = []
-    for axes in figure.get("axes", []) or []:
-        for line in axes.get("lines", []) or []:
-            pieces.append((line.get("x", []), line.get("y", [])))
-        for coll in axes.get("collections", []) or []:
-            for xy in [coll.get("offsets")] + list(coll.get("segments", []) or []):
-                xy = np.asarray(xy if xy is not None else [], dtype=float)
-                if xy.ndim == 2 and xy.shape[1] == 2:
-                    pieces.append((xy[:, 0], xy[:, 1]))
-    curves = []
-    for x, y in pieces:
-        try:
-            x, y = np.ravel(np.asarray(x, dtype=float)), np.ravel(np.asarray(y, dtype=float))
-        except (TypeError, ValueError):
-            continue
-        k = min(x.size, y.size)
-        ok = np.isfinite(x[:k]) & np.isfinite(y[:k])
-        if np.unique(x[:k][ok]).size >= MIN_CURVE_POINTS:
-            curves.append((x[:k][ok], y[:k][ok]))
-    return curves
+    return [(xy[:, 0], xy[:, 1]) for xy in curve_pieces(figure)
+            if np.unique(xy[:, 0]).size >= MIN_CURVE_POINTS]
 
 
 def curve_error(curve: tuple[np.ndarray, np.ndarray],
