@@ -287,6 +287,28 @@ class CurveDistance:
         """The larger relative distance: the relative Hausdorff distance."""
         return max(self.forward_relative, self.backward_relative)
 
+    def gaps(self, what: str, allowed: float) -> str:
+        """What the drawing misses or adds beyond ``allowed`` (relative), for a message.
+
+        ``what`` names the reference ("car"). Empty when neither distance
+        exceeds ``allowed``; otherwise where the farthest missing reference
+        point and the farthest extra point lie, and how far they are.
+        """
+        parts = []
+        if self.forward_relative > allowed:
+            if self.forward_at is None:
+                parts.append(f"the {what} is missing from your drawing: it has no curves")
+            else:
+                x, y = self.forward_at
+                parts.append(f"parts of the {what} are missing from your drawing (the farthest "
+                             f"reference point is {self.forward:.2g} units from any of your "
+                             f"curves, near ({x:.1f}, {y:.1f}))")
+        if self.backward_relative > allowed and self.backward_at is not None:
+            x, y = self.backward_at
+            parts.append(f"your drawing has extra parts (e.g. near ({x:.1f}, {y:.1f}), "
+                         f"{self.backward:.2g} units from the reference)")
+        return "; ".join(parts)
+
     def to_dict(self) -> dict[str, Any]:
         """The fields and ``worst`` as plain data."""
         return {"forward": self.forward, "backward": self.backward, "scale": self.scale,

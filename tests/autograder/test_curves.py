@@ -174,11 +174,19 @@ def test_relative_distance_names_missing_and_extra_parts():
     assert d.worst == pytest.approx(7.0 / 5.0)
     with pytest.raises(AttributeError):
         d.forward = 0.0  # frozen
+    assert d.gaps("triangle", 0.5) == (
+        "parts of the triangle are missing from your drawing (the farthest reference point is "
+        "4 units from any of your curves, near (3.0, 4.0)); your drawing has extra parts (e.g. "
+        "near (10.0, 0.0), 7 units from the reference)")
+    assert d.gaps("triangle", 1.0) == "your drawing has extra parts (e.g. near (10.0, 0.0), " \
+                                      "7 units from the reference)"
+    assert d.gaps("triangle", 2.0) == ""
 
 
 def test_relative_distance_without_student_points():
     d = relative_curve_distance(np.empty((0, 2)), circle(50))
     assert d.forward == math.inf and d.worst == math.inf and d.forward_at is None
+    assert d.gaps("circle", 0.02) == "the circle is missing from your drawing: it has no curves"
 
 
 def test_relative_distance_needs_a_reference():

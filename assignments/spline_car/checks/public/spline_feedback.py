@@ -382,23 +382,6 @@ def _alternatives(strokes: Sequence[np.ndarray]) -> dict[str, Callable[[], np.nd
     }
 
 
-def _gap_message(dist: CurveDistance, what: str) -> str:
-    parts = []
-    if dist.forward_relative > DRAWING_PASS:
-        if dist.forward_at is None:
-            parts.append(f"the {what} is missing from your drawing: it has no curves")
-        else:
-            x, y = dist.forward_at
-            parts.append(f"parts of the {what} are missing from your drawing (the farthest "
-                         f"reference point is {dist.forward:.2g} units from any of your curves, "
-                         f"near ({x:.1f}, {y:.1f}))")
-    if dist.backward_relative > DRAWING_PASS and dist.backward_at is not None:
-        x, y = dist.backward_at
-        parts.append(f"your drawing has extra parts (e.g. near ({x:.1f}, {y:.1f}), "
-                     f"{dist.backward:.2g} units from the reference)")
-    return "; ".join(parts)
-
-
 def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, feedback: Feedback,
                   *, what: str = "car", name: str = "draw_car(strokes)",
                   picture_shown: bool = True) -> None:
@@ -440,7 +423,7 @@ def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, fe
     far = f"{dist.worst:.1%} of" if dist.worst < 1.0 else f"{dist.worst:.3g} times"
     message = (f"Your drawing is {far} the {what}'s size (the diagonal of its "
                f"bounding box, {dist.scale:.3g} units) away from the reference; up to "
-               f"{DRAWING_PASS:.0%} is allowed: {_gap_message(dist, what)}."
+               f"{DRAWING_PASS:.0%} is allowed: {dist.gaps(what, DRAWING_PASS)}."
                + (" Compare the two pictures attached." if picture_shown else ""))
     hint = _diagnose(points, strokes, dist)
     if hint:
