@@ -156,6 +156,14 @@ class Dataset(Generic[T]):
     reason: str = ""
     hint: str = ""
 
+    @property
+    def tol(self) -> float:
+        """``tolerance`` for a check that compares with one: a TypeError if it is None."""
+        if self.tolerance is None:
+            raise TypeError("This dataset has no `tolerance`, but its check compares with one: "
+                            "give it a tolerance and the reason for it.")
+        return float(self.tolerance)
+
     def __post_init__(self) -> None:
         if not callable(self.build):
             raise TypeError(f"`build` must be a function of the rng; got {self.build!r}.")

@@ -287,6 +287,13 @@ def test_dataset_requires_a_reason_for_its_tolerance():
         data.points = 3  # type: ignore[misc]  # frozen
 
 
+def test_dataset_tol_is_the_tolerance_or_an_error():
+    assert Dataset(lambda rng: 1, tolerance=1e-9, reason="rounding").tol == 1e-9
+    assert isinstance(Dataset(lambda rng: 1, tolerance=0, reason="exact").tol, float)
+    with pytest.raises(TypeError, match="no `tolerance`"):
+        Dataset(lambda rng: 1).tol
+
+
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnknownMarkWarning")
 def test_over_datasets_parametrises_with_ids_and_points():
     datasets = {"small": Dataset(lambda rng: 1), "unseen-big": Dataset(lambda rng: 2, points=3)}

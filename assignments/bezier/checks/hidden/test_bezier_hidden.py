@@ -168,17 +168,12 @@ def _grade_points(student: Student, credit: Credit, rng: np.random.Generator, fn
     polygons, params = data.build(rng)
     broken = fb.CONVENTIONS.record()
     for ctrl in polygons:
-        atol = _tolerance(data) * fb.size(ctrl)
+        atol = data.tol * fb.size(ctrl)
         for t in params:
             got = fb.ask(student, fn, ctrl, t, hint=hint, timeout=TIMEOUTS.get(name))
             fb.judge_point(got, oracle_point(ctrl, t), fn=fn, ctrl=ctrl, t=t, atol=atol,
                            broken=broken, hint=hint)
     broken.finish(credit)
-
-
-def _tolerance(data: Dataset[Curves] | Dataset[list[Cut]]) -> float:
-    assert data.tolerance is not None, "every Bezier dataset has a tolerance"
-    return data.tolerance
 
 
 @over_datasets(CURVES)
@@ -302,6 +297,6 @@ def test_split_bezier(student: Student, credit: Credit, rng: np.random.Generator
     broken = fb.CONVENTIONS.record()
     for ctrl, t in data.build(rng):
         fb.grade_split(student, ctrl, t, oracle_split(ctrl, t),
-                       atol=_tolerance(data) * fb.size(ctrl), broken=broken,
+                       atol=data.tol * fb.size(ctrl), broken=broken,
                        picture=feedback.image)
     broken.finish(credit)

@@ -120,18 +120,12 @@ DATASETS: dict[str, Dataset[Data]] = {
 }
 
 
-def _rtol(name: str) -> float:
-    tolerance = DATASETS[name].tolerance
-    assert tolerance is not None, f"dataset {name} has no tolerance"
-    return tolerance
-
-
 @over_datasets(DATASETS)
 def test_spline_coefficients(student: Student, credit: Credit, rng: np.random.Generator,
                              name: str) -> None:
     x, y = DATASETS[name].build(rng)
     got = student.spline_coefficients(x, y)
-    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=_rtol(name))
+    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=DATASETS[name].tol)
 
 
 def _check_property(student: Student, credit: Credit, rng: np.random.Generator, name: str,
@@ -139,7 +133,7 @@ def _check_property(student: Student, credit: Credit, rng: np.random.Generator, 
     """One property of the student's spline of a point set, read from its coefficients."""
     x, y = DATASETS[name].build(rng)
     reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
-    check(reading, x, y, _rtol(name))
+    check(reading, x, y, DATASETS[name].tol)
     judge.finish(reading, credit)
 
 
