@@ -22,6 +22,7 @@ __all__ = [
     "expect_close",
     "expect_equal",
     "expect_int",
+    "expect_number",
     "same_cycle",
     "is_rotation_reversed",
 ]
@@ -88,6 +89,20 @@ def expect_int(got: Any, *, name: str = "the result") -> int:
     if isinstance(got, float) and not got.is_integer():
         raise CheckFailure(f"{name} should be an integer; got {got!r}.")
     return int(got)
+
+
+def expect_number(got: Any, *, name: str = "the result", hint: str = "") -> float:
+    """Return ``got`` as a Python float: a real number, or a 0-d array of one.
+
+    For a scalar answer to a scalar input: bools, strings, None and arrays of
+    any other shape (even of one value) are refused, with ``hint`` at the end.
+    """
+    if isinstance(got, np.ndarray) and got.ndim == 0 and got.dtype.kind in "iuf":
+        got = got.item()
+    if isinstance(got, bool) or not isinstance(got, (int, float, np.integer, np.floating)):
+        raise CheckFailure(_with_hint(f"{name} should be a single number; got {describe(got)}.",
+                                      hint))
+    return float(got)
 
 
 def expect_close(got: Any, expected: Any, *, rtol: ArrayLike, atol: ArrayLike,

@@ -20,6 +20,7 @@ from autograder.checks import (
     expect_close,
     expect_equal,
     expect_int,
+    expect_number,
     explain_errors,
     figure_png,
     is_figure,
@@ -261,6 +262,26 @@ def test_expect_int_and_equal():
     expect_equal(np.array([1, 2]), np.array([1, 2]))
     assert "differs at index [1]" in failure(expect_equal, np.array([1, 3]), np.array([1, 2]))
     assert "expected True" in failure(expect_equal, 1, True)
+
+
+@pytest.mark.parametrize(("got", "value"), [
+    (0.5, 0.5), (3, 3.0), (np.float32(0.25), 0.25), (np.int64(7), 7.0), (np.array(1.5), 1.5),
+    (NAN, NAN), (-INF, -INF),
+])
+def test_expect_number_accepts_real_scalars(got, value):
+    result = expect_number(got)
+    assert type(result) is float and (result == value or (np.isnan(value) and np.isnan(result)))
+
+
+@pytest.mark.parametrize(("got", "words"), [
+    (True, "a bool"), (None, "None"), ("0.5", "a str"), (np.array([0.5]), "shape (1,)"),
+    (np.zeros((2, 2)), "shape (2, 2)"), ([0.5], "a list of 1"), (1j, "a complex"),
+    (np.array(True), "dtype bool"),
+])
+def test_expect_number_refuses_everything_else(got, words):
+    message = failure(expect_number, got, name="p(0.3)", hint="Return float(...).")
+    assert message.startswith("p(0.3) should be a single number; got ")
+    assert words in message and message.endswith(". Return float(...).")
 
 
 def test_describe_is_short_and_safe():

@@ -22,6 +22,7 @@ from autograder.checks import (
     Student,
     expect_array,
     expect_close,
+    expect_number,
     over_datasets,
     show_number,
 )
@@ -106,10 +107,8 @@ def test_make_interpolant_returns_a_working_function(student: Student, rng: np.r
     t = _points(rng)
     expect_close(p(t), _reference_values(function, n, kind, t), rtol=0, atol=data.tol,
                  name=f"p(t) from make_interpolant(f, {n})")
-    value = p(0.3)
-    if np.ndim(value) != 0:
-        raise CheckFailure(f"p(0.3) returned an array of shape {np.shape(value)}; a number t "
-                           "must give a number (return float(...) for a 0-d result).")
+    expect_number(p(0.3), name="p(0.3)",
+                  hint="A number t must give a number (return float(...) for a 0-d result).")
     x = np.asarray(student.interpolation_nodes(n, kind), dtype=float)
     sample = function(x[3:4])[0]
     if p(x[3]) != sample:

@@ -31,6 +31,7 @@ from autograder.checks import (
     describe,
     expect_array,
     expect_close,
+    expect_number,
     explain_errors,
     sentences,
     show_number,
@@ -337,17 +338,16 @@ def judge_exact(got: object, fvals: np.ndarray, nodes: np.ndarray, index: np.nda
 
 def judge_scalar(got: object, *, call: str, credit: Credit) -> float:
     """A scalar ``t`` gives a scalar: a float, or a 0-d array. Returns the value."""
-    if isinstance(got, bool) or got is None or isinstance(got, (str, dict)):
-        raise CheckFailure(f"{call} should return a number for a scalar t; got {describe(got)}.")
-    arr = expect_array(got, dtype_kind="iuf", name=call)
-    if arr.ndim == 0:
-        return float(arr)
-    if arr.size == 1:
+    try:
+        arr = np.asarray(got) if isinstance(got, (list, tuple, np.ndarray)) else None
+    except ValueError:  # ragged
+        arr = None
+    if arr is not None and arr.ndim and arr.size == 1 and arr.dtype.kind in "iuf":
         CONVENTIONS.partial(credit, "array-for-scalar",
                             f"{call} returned {describe(got)} for a scalar t; return a scalar "
                             "(a float) when t is a scalar, e.g. with float(...) or result[()] "
                             "on a 0-d array.")
-    raise CheckFailure(f"{call} should return one number for a scalar t; got {describe(got)}.")
+    return expect_number(got, name=call, hint="A scalar t gives one number.")
 
 
 # ---------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from autograder.checks import (
     Dataset,
     Feedback,
     Student,
-    describe,
+    expect_number,
     over_datasets,
 )
 from reference import CubicSpline, car
@@ -313,12 +313,9 @@ def test_spline_eval_scalar(student: Student, credit: Credit,
     x, y = DATASETS["random-12"].build(rng)  # fixed data: the rng is not used
     rows = expected_rows(x, y)
     t = float(0.5 * (x[4] + x[5]))
-    got = student.spline_eval(x, rows, t)
-    value = got.item() if isinstance(got, np.ndarray) and got.ndim == 0 else got
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise CheckFailure(f"spline_eval(x, coeffs, t) with a single number t = {t:.4g} should "
-                           f"return a single number; got {describe(got)}.")
-    judge.grade_eval(np.array(float(value)), x, np.array(t), evaluate(rows, x, np.array(t)),
+    value = expect_number(student.spline_eval(x, rows, t),
+                          name=f"spline_eval(x, coeffs, t) with a single number t = {t:.4g}")
+    judge.grade_eval(np.array(value), x, np.array(t), evaluate(rows, x, np.array(t)),
                      rtol=EVAL_RTOL, credit=credit,
                      retry_reversed=lambda: student.spline_eval(x, rows[:, ::-1].copy(), t))
 
