@@ -23,7 +23,8 @@ An assignment's checks are ordinary pytest functions over the fixtures of
 * text for messages: :func:`show_number` (every digit that matters, so
   ``0.9999999`` never reads as ``1``), :func:`show_point`, :func:`show_list`,
   :func:`show_points`, :func:`plural`, :func:`sentence`, :func:`sentences`;
-* pictures: :func:`is_figure` (figure data from the boundary),
+* pictures: :func:`is_figure` and :func:`expect_figure` (figure data from the
+  boundary),
   :func:`curve_pieces` and :func:`curve_points` (what a figure draws, piece by
   piece or as one point set),
   :func:`figure_png` (the PNG inside figure data), :func:`render_png` (a
@@ -99,6 +100,7 @@ __all__ = [
     "expect_array",
     "expect_close",
     "expect_equal",
+    "expect_figure",
     "expect_int",
     "expect_number",
     "explain_errors",
@@ -450,6 +452,15 @@ def sentences(parts: Iterable[str]) -> str:
 def is_figure(value: object) -> TypeGuard[FigureData]:
     """Whether ``value`` is figure data from the boundary (a mapping with a list of axes)."""
     return isinstance(value, Mapping) and isinstance(value.get("axes"), list)
+
+
+def expect_figure(value: object, *, name: str, hint: str = "") -> FigureData:
+    """Return ``value`` as figure data, or fail: ``name`` should return the Figure it drew on."""
+    if not is_figure(value):
+        raise CheckFailure(sentences([
+            f"{name} should return the matplotlib Figure it drew on (fig, ax = plt.subplots(); "
+            f"...; return fig); got {describe(value)}", hint]))
+    return value
 
 
 def figure_png(figure: Any) -> bytes | None:

@@ -19,6 +19,7 @@ from autograder.checks import (
     expect_array,
     expect_close,
     expect_equal,
+    expect_figure,
     expect_int,
     expect_number,
     explain_errors,
@@ -282,6 +283,16 @@ def test_expect_number_refuses_everything_else(got, words):
     message = failure(expect_number, got, name="p(0.3)", hint="Return float(...).")
     assert message.startswith("p(0.3) should be a single number; got ")
     assert words in message and message.endswith(". Return float(...).")
+
+
+def test_expect_figure_returns_figure_data_or_says_what_came_back():
+    figure = {"axes": [], "png": b""}
+    assert expect_figure(figure, name="plot(x)") is figure
+    assert failure(expect_figure, None, name="plot(x)") == (
+        "plot(x) should return the matplotlib Figure it drew on (fig, ax = plt.subplots(); "
+        "...; return fig); got None (did you forget `return`?).")
+    assert failure(expect_figure, [1], name="plot(x)", hint="no figure was drawn either"
+                   ).endswith("got a list of 1 item(s). No figure was drawn either.")
 
 
 def test_describe_is_short_and_safe():

@@ -37,7 +37,7 @@ from autograder.checks import (
     call_for_figure,
     describe,
     expect_array,
-    is_figure,
+    expect_figure,
     sentence,
     show_point,
 )
@@ -316,16 +316,14 @@ def judge_figure(figure: object, points: ArrayLike, triangles: ArrayLike, u: Arr
     pts = np.asarray(points, dtype=float)
     tri = np.asarray(triangles, dtype=np.int64)
     u = np.asarray(u, dtype=float)
-    if not is_figure(figure):
-        raise CheckFailure("plot_on_mesh(points, triangles, u) should return the matplotlib "
-                           f"Figure it drew on (e.g. `return fig`); got {describe(figure)}.")
+    fig = expect_figure(figure, name="plot_on_mesh(points, triangles, u)")
     step = max(1, len(tri) // MAX_SAMPLES)
     samples = pts[tri[::step]].mean(axis=1)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     slack = 0.01 * float(np.max(hi - lo))
     best_share, misplaced = 0.0, 0
     coloured: list[FigureData] = []
-    for ax in figure["axes"]:
+    for ax in fig["axes"]:
         for coll in ax.get("collections", []):
             segments = [s for s in coll.get("segments", []) if len(s)]
             if not segments:

@@ -31,6 +31,7 @@ from autograder.checks import (
     describe,
     expect_array,
     expect_close,
+    expect_figure,
     expect_number,
     explain_errors,
     sentences,
@@ -370,9 +371,7 @@ def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[Figur
     call = f"plot_runge({n})"
     value, figure = call_for_figure(student, "plot_runge", n, feedback=feedback)
     if figure is None:
-        raise CheckFailure(f"{call} should return a matplotlib Figure (fig, ax = "
-                           f"plt.subplots(); ...; return fig); got {describe(value)} and no "
-                           "figure was drawn.")
+        figure = expect_figure(value, name=call, hint="no figure was drawn either")
     if figure is value:
         return figure, "", call
     return figure, (f"{call} returned {describe(value)}, not the Figure; it drew one, so I "

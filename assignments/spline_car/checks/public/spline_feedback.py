@@ -34,6 +34,7 @@ from autograder.checks import (
     describe,
     expect_array,
     expect_close,
+    expect_figure,
     is_figure,
     show_number,
     side_by_side,
@@ -397,17 +398,14 @@ def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, fe
     feedback.image(f"your {what} beside the reference", side_by_side(
         fig if is_figure(fig) else None, draw_reference(strokes),
         title=f"{name}: your drawing (left) and the reference (right)"))
-    if not is_figure(fig):
-        raise CheckFailure(f"{name} should return the matplotlib Figure it drew on "
-                           "(fig, ax = plt.subplots() ... return fig); got "
-                           f"{describe(fig)}.")
-    points = curve_points(fig)
+    figure = expect_figure(fig, name=name)
+    points = curve_points(figure)
     if len(points) == 0:
         raise CheckFailure(f"The figure returned by {name} has no curves on it. Draw each "
                            "stroke with ax.plot on the axes of the figure you return.")
     reference = sample_strokes(strokes)
     dist = relative_curve_distance(points, reference)
-    mistake = _known_mistake(fig, strokes, reference, dist.scale)
+    mistake = _known_mistake(figure, strokes, reference, dist.scale)
     if mistake:
         message = (f"Your {what} follows the wrong curve: {mistake}"
                    + (" Compare the two pictures attached." if picture_shown else ""))
@@ -415,7 +413,7 @@ def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, fe
             credit.partial(0.5, message)
         raise CheckFailure(message)
     if dist.worst <= DRAWING_PASS:
-        if not any(ax.get("aspect") == "equal" for ax in fig["axes"] if isinstance(ax, dict)):
+        if not any(ax.get("aspect") == "equal" for ax in figure["axes"] if isinstance(ax, dict)):
             CONVENTIONS.partial(credit, "aspect",
                                 f"Your {what} is right, but the axes do not have equal aspect, "
                                 "so circles look like ellipses: call ax.set_aspect('equal').")
