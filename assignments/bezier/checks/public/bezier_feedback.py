@@ -433,7 +433,7 @@ def split_failure(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: floa
             formula = "t s" if side == "left" else "t + (1 - t) s"
             return (f"{call}: the {side} polygon does not trace its piece of the curve. At "
                     f"s = {show_number(samples[k])} its Bezier curve is at "
-                    f"{show_point(mine[k])}, but C({formula}) = C({where[k]:.6g}) = "
+                    f"{show_point(mine[k])}, but C({formula}) = C({show_number(where[k], 6)}) = "
                     f"{show_point(theirs[k])}. {SPLIT_HINT}")
     for side, poly, want in (("left", left, expected[0]), ("right", right, expected[1])):
         if off(poly, want):

@@ -39,6 +39,7 @@ from autograder.checks import (
     expect_array,
     expect_figure,
     sentence,
+    show_number,
     show_point,
 )
 
@@ -345,7 +346,8 @@ def judge_figure(figure: object, points: ArrayLike, triangles: ArrayLike, u: Arr
             found = f"the best filled area covers only {best_share:.0%} of the triangles"
         elif misplaced:
             found = (f"what it fills reaches outside the points, which lie in x from "
-                     f"{lo[0]:.6g} to {hi[0]:.6g} and y from {lo[1]:.6g} to {hi[1]:.6g} "
+                     f"{show_number(lo[0], 6)} to {show_number(hi[0], 6)} and y from "
+                     f"{show_number(lo[1], 6)} to {show_number(hi[1], 6)} "
                      "(x and y swapped?)")
         else:
             found = "it has no filled area"
@@ -376,8 +378,9 @@ def _check_colours(coloured: list[FigureData], u: np.ndarray) -> None:
         raise CheckFailure("The filled area of your figure has no colour data: colour the "
                            "triangles by u (tricontourf or tripcolor with u as the values).")
     cmin, cmax = ranges[0]
-    raise CheckFailure(f"The colours of your plot run from {cmin:.6g} to {cmax:.6g}, but u runs "
-                       f"from {umin:.6g} to {umax:.6g}: colour the mesh by the values u "
+    raise CheckFailure(f"The colours of your plot run from {show_number(cmin, 6)} to "
+                       f"{show_number(cmax, 6)}, but u runs from {show_number(umin, 6)} to "
+                       f"{show_number(umax, 6)}: colour the mesh by the values u "
                        "themselves, one value per point.")
 
 

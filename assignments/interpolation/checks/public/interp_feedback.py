@@ -300,7 +300,7 @@ def judge_values(got: object, expected: ArrayLike, *, t: ArrayLike, nodes: np.nd
         c = scale_factor(flat, want, ~np.isin(tt, nodes))
         if c is not None:
             CONVENTIONS.partial(credit, "first-form",
-                                f"{call}: every value is {c:.6g} times the interpolant. That is "
+                                f"{call}: every value is {show_number(c, 6)} times the interpolant. That is "
                                 "what the first barycentric form l(t) sum_j w_j f_j / (t - x_j) "
                                 "gives when the weights come at another scale. The weights may "
                                 "have any common scale: divide by sum_j w_j / (t - x_j) (the "
@@ -442,8 +442,8 @@ def judge_runge_plot(figure: FigureData, *, call: str, wanted: Sequence[Curve],
                 score += share
             else:
                 score += share / 2
-                parts.append(f"{curve.name} in your plot covers only [{x.min():.3g}, "
-                             f"{x.max():.3g}]; draw it over the whole interval [-1, 1]")
+                parts.append(f"{curve.name} in your plot covers only [{show_number(x.min(), 3)}, "
+                             f"{show_number(x.max(), 3)}]; draw it over the whole interval [-1, 1]")
             continue
         parts.append(_missing(curve, curves, errors, best, (nearby or {}).get(curve.name, ())))
     if note:
@@ -469,4 +469,4 @@ def _missing(curve: Curve, curves: list[tuple[np.ndarray, np.ndarray]],
         if any(curve_error(c, other.fn)[0] <= CURVE_RTOL for c in curves):
             return text + f"; one of your curves is {other.name}"
     err, x = errors[best]
-    return text + f" (the closest one is off by {err:.2g} at x = {x:.3g})"
+    return text + f" (the closest one is off by {err:.2g} at x = {show_number(x, 3)})"

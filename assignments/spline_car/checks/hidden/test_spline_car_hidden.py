@@ -28,6 +28,7 @@ from autograder.checks import (
     Student,
     expect_number,
     over_datasets,
+    show_number,
 )
 from reference import CubicSpline, car
 
@@ -314,7 +315,7 @@ def test_spline_eval_scalar(student: Student, credit: Credit,
     rows = expected_rows(x, y)
     t = float(0.5 * (x[4] + x[5]))
     value = expect_number(student.spline_eval(x, rows, t),
-                          name=f"spline_eval(x, coeffs, t) with a single number t = {t:.4g}")
+                          name=f"spline_eval(x, coeffs, t) with a single number t = {show_number(t, 4)}")
     judge.grade_eval(np.array(value), x, np.array(t), evaluate(rows, x, np.array(t)),
                      rtol=EVAL_RTOL, credit=credit,
                      retry_reversed=lambda: student.spline_eval(x, rows[:, ::-1].copy(), t))
