@@ -7,8 +7,9 @@ An assignment's checks are ordinary pytest functions over the fixtures of
   :class:`Credit` (``credit``), :class:`Feedback` (``feedback``);
 * :class:`CheckFailure` and the staged comparisons of :mod:`autograder.compare`
   (:func:`expect_array`, :func:`expect_close`, :func:`expect_equal`,
-  :func:`expect_int`, :func:`expect_number`, :func:`describe`, :func:`same_cycle`,
-  :func:`is_rotation_reversed`), right on NaN and infinities;
+  :func:`expect_indices`, :func:`expect_int`, :func:`expect_number`,
+  :func:`describe`, :func:`same_cycle`, :func:`is_rotation_reversed`), right on
+  NaN and infinities;
 * named datasets: :class:`Dataset` holds how to build the data, the points it
   is worth, its tolerance and the reason for that tolerance, and a hint;
   :func:`over_datasets` parametrises a check over a mapping of them (or some
@@ -73,6 +74,7 @@ from autograder.compare import (
     expect_array,
     expect_close,
     expect_equal,
+    expect_indices,
     expect_int,
     expect_number,
     is_rotation_reversed,
@@ -101,6 +103,7 @@ __all__ = [
     "expect_close",
     "expect_equal",
     "expect_figure",
+    "expect_indices",
     "expect_int",
     "expect_number",
     "explain_errors",

@@ -21,6 +21,7 @@ __all__ = [
     "expect_array",
     "expect_close",
     "expect_equal",
+    "expect_indices",
     "expect_int",
     "expect_number",
     "same_cycle",
@@ -78,6 +79,28 @@ def expect_array(got: Any, *, shape: Sequence[int | None] | None = None,
 def _kinds(dtype_kind: str) -> str:
     words = dict.fromkeys(_KIND_WORDS[k] for k in dtype_kind if k in _KIND_WORDS)
     return " or ".join(words) or "numbers"
+
+
+def expect_indices(got: Any, n: int, *, shape: Sequence[int | None] | None = None,
+                   name: str = "the result", rows: str = "`points`",
+                   at: Callable[[tuple[int, ...]], str] | None = None,
+                   hint: str = "") -> NDArray[np.int64]:
+    """Return ``got`` as an int64 array of row numbers of a table of ``n`` rows.
+
+    Stages: integers of the given ``shape`` (:func:`expect_array`), then every
+    index in ``0 .. n - 1``: the first one outside is named with where it is
+    (``at(index)``, default its entry in ``got``). ``rows`` names the table
+    in the message; ``hint`` ends every failure message.
+    """
+    arr = expect_array(got, shape=shape, dtype_kind="iu", name=name, hint=hint)
+    bad = np.argwhere((arr < 0) | (arr >= n))
+    if bad.size:
+        where = tuple(int(i) for i in bad[0])
+        place = at(where) if at else f"entry {_index(where)}"
+        span = f"{n} rows, so indices run from 0 to {n - 1}" if n else "no rows"
+        raise CheckFailure(_with_hint(f"{name} holds {int(arr[where])} at {place}, which is "
+                                      f"not a row of {rows}: it has {span}.", hint))
+    return arr.astype(np.int64)
 
 
 def expect_int(got: Any, *, name: str = "the result") -> int:

@@ -20,6 +20,7 @@ from autograder.checks import (
     expect_close,
     expect_equal,
     expect_figure,
+    expect_indices,
     expect_int,
     expect_number,
     explain_errors,
@@ -293,6 +294,28 @@ def test_expect_figure_returns_figure_data_or_says_what_came_back():
         "...; return fig); got None (did you forget `return`?).")
     assert failure(expect_figure, [1], name="plot(x)", hint="no figure was drawn either"
                    ).endswith("got a list of 1 item(s). No figure was drawn either.")
+
+
+def test_expect_indices_are_rows_of_the_table():
+    got = expect_indices([2, 0, 1], 3, shape=(None,))
+    assert got.dtype == np.int64 and got.tolist() == [2, 0, 1]
+    assert failure(expect_indices, [2, 3, -1], 3, name="hull") == (
+        "hull holds 3 at entry [1], which is not a row of `points`: it has 3 rows, so "
+        "indices run from 0 to 2.")
+    tri = np.array([[0, 1, 2], [1, -1, 2]])
+    message = failure(expect_indices, tri, 3, shape=(None, 3), name="delaunay(points)",
+                      at=lambda i: f"triangle {i[0]} {show_point(tri[i[0]])}", hint="Subtract 1?")
+    assert message == ("delaunay(points) holds -1 at triangle 1 (1, -1, 2), which is not a row "
+                       "of `points`: it has 3 rows, so indices run from 0 to 2. Subtract 1?")
+    assert "it has no rows" in failure(expect_indices, [0], 0, rows="`nodes`")
+
+
+@pytest.mark.parametrize(("got", "words"), [
+    ([0.0, 1.0], "should hold integers"), ([[0, 1]], "should have shape (any)"),
+    ("01", "should be an array-like of integers"),
+])
+def test_expect_indices_stages_before_the_range(got, words):
+    assert words in failure(expect_indices, got, 5, shape=(None,), hint="Row numbers, please.")
 
 
 def test_describe_is_short_and_safe():

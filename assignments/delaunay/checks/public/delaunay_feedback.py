@@ -38,6 +38,7 @@ from autograder.checks import (
     describe,
     expect_array,
     expect_figure,
+    expect_indices,
     sentence,
     show_number,
     show_point,
@@ -88,16 +89,10 @@ def as_triangles(got: object) -> np.ndarray:
 
 def check_indices(tri: np.ndarray, n: int) -> None:
     """Fail on indices outside ``0..n-1``, a vertex repeated in a triangle, a triangle twice."""
-    bad = np.flatnonzero(np.any((tri < 0) | (tri >= n), axis=1))
-    if bad.size:
-        k = int(bad[0])
-        value = int(next(v for v in tri[k] if not 0 <= v < n))
-        extra = ""
-        if n <= value <= n + 2:
-            extra = (" Is it a corner of the super-triangle? Remove every triangle that "
-                     "touches one of its corners before returning.")
-        raise CheckFailure(f"Triangle {k} {show_triangle(tri[k])} uses index {value}, but "
-                           f"`points` has {n} rows, so indices run from 0 to {n - 1}.{extra}")
+    super_corner = bool(np.any((tri >= n) & (tri <= n + 2)))
+    expect_indices(tri, n, name=NAME, at=lambda i: f"triangle {i[0]} {show_triangle(tri[i[0]])}",
+                   hint="Is it a corner of the super-triangle? Remove every triangle that touches "
+                        "one of its corners before returning." if super_corner else "")
     same = np.flatnonzero((tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2])
                           | (tri[:, 0] == tri[:, 2]))
     if same.size:
