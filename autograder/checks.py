@@ -7,8 +7,9 @@ An assignment's checks are ordinary pytest functions over the fixtures of
   :class:`Credit` (``credit``), :class:`Feedback` (``feedback``);
 * :class:`CheckFailure` and the staged comparisons of :mod:`autograder.compare`
   (:func:`expect_array`, :func:`expect_close`, :func:`expect_equal`,
-  :func:`expect_int`, :func:`describe`, :func:`same_cycle`,
-  :func:`is_rotation_reversed`), right on NaN and infinities;
+  :func:`expect_indices`, :func:`expect_int`, :func:`expect_number`,
+  :func:`describe`, :func:`same_cycle`, :func:`is_rotation_reversed`), right on
+  NaN and infinities;
 * named datasets: :class:`Dataset` holds how to build the data, the points it
   is worth, its tolerance and the reason for that tolerance, and a hint;
   :func:`over_datasets` parametrises a check over a mapping of them (or some
@@ -23,7 +24,10 @@ An assignment's checks are ordinary pytest functions over the fixtures of
 * text for messages: :func:`show_number` (every digit that matters, so
   ``0.9999999`` never reads as ``1``), :func:`show_point`, :func:`show_list`,
   :func:`show_points`, :func:`plural`, :func:`sentence`, :func:`sentences`;
-* pictures: :func:`is_figure` (figure data from the boundary),
+* pictures: :func:`is_figure` and :func:`expect_figure` (figure data from the
+  boundary),
+  :func:`curve_pieces` and :func:`curve_points` (what a figure draws, piece by
+  piece or as one point set),
   :func:`figure_png` (the PNG inside figure data), :func:`render_png` (a
   figure drawn by the check) and :func:`side_by_side` (the student's picture
   beside a reference drawing).
@@ -70,11 +74,13 @@ from autograder.compare import (
     expect_array,
     expect_close,
     expect_equal,
+    expect_indices,
     expect_int,
+    expect_number,
     is_rotation_reversed,
     same_cycle,
 )
-from autograder.curves import decode_png, render_side_by_side
+from autograder.curves import curve_pieces, curve_points, decode_png, render_side_by_side
 from autograder.errors import CheckFailure, StudentException
 from autograder.plugin import Credit, Feedback
 from autograder.proxy import Student
@@ -89,12 +95,17 @@ __all__ = [
     "FigureData",
     "Student",
     "call_for_figure",
+    "curve_pieces",
+    "curve_points",
     "decode_png",
     "describe",
     "expect_array",
     "expect_close",
     "expect_equal",
+    "expect_figure",
+    "expect_indices",
     "expect_int",
+    "expect_number",
     "explain_errors",
     "figure_png",
     "is_figure",
@@ -151,6 +162,14 @@ class Dataset(Generic[T]):
     tolerance: float | None = None
     reason: str = ""
     hint: str = ""
+
+    @property
+    def tol(self) -> float:
+        """``tolerance`` for a check that compares with one: a TypeError if it is None."""
+        if self.tolerance is None:
+            raise TypeError("This dataset has no `tolerance`, but its check compares with one: "
+                            "give it a tolerance and the reason for it.")
+        return float(self.tolerance)
 
     def __post_init__(self) -> None:
         if not callable(self.build):
@@ -436,6 +455,15 @@ def sentences(parts: Iterable[str]) -> str:
 def is_figure(value: object) -> TypeGuard[FigureData]:
     """Whether ``value`` is figure data from the boundary (a mapping with a list of axes)."""
     return isinstance(value, Mapping) and isinstance(value.get("axes"), list)
+
+
+def expect_figure(value: object, *, name: str, hint: str = "") -> FigureData:
+    """Return ``value`` as figure data, or fail: ``name`` should return the Figure it drew on."""
+    if not is_figure(value):
+        raise CheckFailure(sentences([
+            f"{name} should return the matplotlib Figure it drew on (fig, ax = plt.subplots(); "
+            f"...; return fig); got {describe(value)}", hint]))
+    return value
 
 
 def figure_png(figure: Any) -> bytes | None:

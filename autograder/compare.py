@@ -7,10 +7,11 @@ never from the check's source.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from autograder.errors import CheckFailure
 
@@ -20,7 +21,9 @@ __all__ = [
     "expect_array",
     "expect_close",
     "expect_equal",
+    "expect_indices",
     "expect_int",
+    "expect_number",
     "same_cycle",
     "is_rotation_reversed",
 ]
@@ -78,6 +81,28 @@ def _kinds(dtype_kind: str) -> str:
     return " or ".join(words) or "numbers"
 
 
+def expect_indices(got: Any, n: int, *, shape: Sequence[int | None] | None = None,
+                   name: str = "the result", rows: str = "`points`",
+                   at: Callable[[tuple[int, ...]], str] | None = None,
+                   hint: str = "") -> NDArray[np.int64]:
+    """Return ``got`` as an int64 array of row numbers of a table of ``n`` rows.
+
+    Stages: integers of the given ``shape`` (:func:`expect_array`), then every
+    index in ``0 .. n - 1``: the first one outside is named with where it is
+    (``at(index)``, default its entry in ``got``). ``rows`` names the table
+    in the message; ``hint`` ends every failure message.
+    """
+    arr = expect_array(got, shape=shape, dtype_kind="iu", name=name, hint=hint)
+    bad = np.argwhere((arr < 0) | (arr >= n))
+    if bad.size:
+        where = tuple(int(i) for i in bad[0])
+        place = at(where) if at else f"entry {_index(where)}"
+        span = f"{n} rows, so indices run from 0 to {n - 1}" if n else "no rows"
+        raise CheckFailure(_with_hint(f"{name} holds {int(arr[where])} at {place}, which is "
+                                      f"not a row of {rows}: it has {span}.", hint))
+    return arr.astype(np.int64)
+
+
 def expect_int(got: Any, *, name: str = "the result") -> int:
     """Return ``got`` as a Python int (bools and floats with a fraction are refused)."""
     if isinstance(got, np.ndarray) and got.ndim == 0:
@@ -89,35 +114,83 @@ def expect_int(got: Any, *, name: str = "the result") -> int:
     return int(got)
 
 
-def expect_close(got: Any, expected: Any, *, rtol: float, atol: float,
-                 name: str = "the result") -> NDArray[Any]:
+def expect_number(got: Any, *, name: str = "the result", hint: str = "") -> float:
+    """Return ``got`` as a Python float: a real number, or a 0-d array of one.
+
+    For a scalar answer to a scalar input: bools, strings, None and arrays of
+    any other shape (even of one value) are refused, with ``hint`` at the end.
+    """
+    if isinstance(got, np.ndarray) and got.ndim == 0 and got.dtype.kind in "iuf":
+        got = got.item()
+    if isinstance(got, bool) or not isinstance(got, (int, float, np.integer, np.floating)):
+        raise CheckFailure(_with_hint(f"{name} should be a single number; got {describe(got)}.",
+                                      hint))
+    return float(got)
+
+
+def expect_close(got: Any, expected: Any, *, rtol: ArrayLike, atol: ArrayLike,
+                 name: str = "the result", at: Callable[[tuple[int, ...]], str] | None = None,
+                 hint: str = "") -> NDArray[Any]:
     """Check ``got`` against ``expected`` elementwise within ``atol + rtol * |expected|``.
 
     Stages: type and shape (:func:`expect_array`), then non-finite values (NaN
     exactly where NaN is expected, an infinity exactly where the same infinity
     is expected), then the finite values against the tolerance. Each failure
-    names the first offending index.
+    names the worst offending entry, what was expected there, what came back,
+    how far off it is and how far it may be, and how many entries fail.
+
+    Parameters
+    ----------
+    rtol, atol : float or array_like
+        Tolerances; arrays broadcast against ``expected`` (a tolerance per
+        column, per point, ...). Each must be >= 0.
+    name : str, optional
+        What was compared, usually the call (``"f(x)"``).
+    at : callable, optional
+        ``at(index) -> str`` says where an entry is, for the message
+        (``lambda i: f"node {i[0]}"``, ``lambda i: f"t = {t[i]}"``); default
+        ``"index [i, j]"``.
+    hint : str, optional
+        Ends every failure message: how to find or fix the mistake.
     """
     want = np.asarray(expected)
     if want.dtype.kind not in "biufc":
         raise TypeError(f"`expected` must hold numbers; got dtype {want.dtype}.")
-    arr = expect_array(got, shape=want.shape, dtype_kind="biufc", name=name)
+    rtol_, atol_ = (_tolerance(v, key, want.shape) for v, key in ((rtol, "rtol"), (atol, "atol")))
+    arr = expect_array(got, shape=want.shape, dtype_kind="biufc", name=name, hint=hint)
+    where_text = at or (lambda where: f"index {_index(where)}")
     kind = complex if "c" in (arr.dtype.kind, want.dtype.kind) else float
     g, w = arr.astype(kind), want.astype(kind)
-    _expect_same_non_finite(g, w, name)
+    _expect_same_non_finite(g, w, name, where_text, hint)
     finite = np.isfinite(w)
     err = np.where(finite, np.abs(g - np.where(finite, w, 0)), 0.0).astype(float)
-    bound = atol + rtol * np.where(finite, np.abs(w), 0.0)
+    bound = atol_ + rtol_ * np.where(finite, np.abs(w), 0.0)
     over = err > bound
     if over.any():
         where = tuple(int(i) for i in np.unravel_index(np.argmax(err - bound), err.shape)) \
             if err.ndim else ()
-        raise CheckFailure(
-            f"{name} is off at index {_index(where)}: expected {_num(w[where])}, got "
+        raise CheckFailure(_with_hint(
+            f"{name} is off at {where_text(where)}: expected {_num(w[where])}, got "
             f"{_num(g[where])} (error {float(err[where]):.2e}, allowed "
             f"{float(bound[where]):.2e}); {int(over.sum())} of {over.size} value(s) are "
-            "outside the tolerance.")
+            "outside the tolerance.", hint))
     return arr
+
+
+def _tolerance(value: ArrayLike, key: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """A tolerance as a float array broadcast to ``shape``; refused unless finite and >= 0."""
+    try:
+        tol = np.broadcast_to(np.asarray(value, dtype=float), shape)
+    except (TypeError, ValueError):
+        raise ValueError(f"`{key}` must be a number or an array that broadcasts to the "
+                         f"expected shape {shape}; got {_short(value)}.") from None
+    if not np.all(tol >= 0) or not np.all(np.isfinite(tol)):
+        raise ValueError(f"`{key}` must be finite and >= 0; got {_short(value)}.")
+    return tol
+
+
+def _with_hint(message: str, hint: str) -> str:
+    return f"{message} {hint}" if hint else message
 
 
 def _num(value: Any) -> str:
@@ -130,7 +203,8 @@ def _num(value: Any) -> str:
     return repr(value)
 
 
-def _expect_same_non_finite(got: NDArray[Any], want: NDArray[Any], name: str) -> None:
+def _expect_same_non_finite(got: NDArray[Any], want: NDArray[Any], name: str,
+                            at: Callable[[tuple[int, ...]], str], hint: str) -> None:
     """Fail at the first index where NaN or an infinity is in one array and not the other."""
     def label(v: Any) -> str:
         return "NaN" if np.isnan(v) else ("+inf" if np.real(v) > 0 or np.imag(v) > 0
@@ -145,8 +219,8 @@ def _expect_same_non_finite(got: NDArray[Any], want: NDArray[Any], name: str) ->
         g, w = got[where], want[where]
         count = int(mismatch.sum())
         more = f" ({count} of {mismatch.size} values differ so)" if count > 1 else ""
-        raise CheckFailure(f"{name} has {label(g)} at index {_index(where)} where "
-                           f"{label(w)} was expected{more}.")
+        raise CheckFailure(_with_hint(f"{name} has {label(g)} at {at(where)} where "
+                                      f"{label(w)} was expected{more}.", hint))
 
 
 def _index(where: tuple[int, ...]) -> str:

@@ -34,6 +34,7 @@ from scipy.spatial import cKDTree
 
 __all__ = [
     "CurveDistance",
+    "curve_pieces",
     "curve_points",
     "decode_png",
     "hausdorff",
@@ -75,6 +76,14 @@ def _as_xy(data: Any) -> NDArray[np.float64]:
     return arr
 
 
+def _as_flat(data: Any) -> NDArray[np.float64]:
+    """``data`` as a flat float array; an empty one if it holds anything but numbers."""
+    try:
+        return np.ravel(np.asarray(data if data is not None else [], dtype=np.float64))
+    except (TypeError, ValueError):
+        return np.empty(0)
+
+
 def _densify(polyline: NDArray[np.float64], samples: int) -> NDArray[np.float64]:
     """The finite points of ``polyline`` plus ``samples - 1`` points inside each segment.
 
@@ -99,8 +108,7 @@ def _axes_pieces(axes: Mapping[str, Any]) -> tuple[list[NDArray[np.float64]],
     polylines: list[NDArray[np.float64]] = []
     scattered: list[NDArray[np.float64]] = []
     for line in axes.get("lines", []) or []:
-        x = np.ravel(np.asarray(line.get("x", []), dtype=np.float64))
-        y = np.ravel(np.asarray(line.get("y", []), dtype=np.float64))
+        x, y = _as_flat(line.get("x")), _as_flat(line.get("y"))
         k = min(len(x), len(y))
         xy = np.column_stack([x[:k], y[:k]])
         if line.get("linestyle", "-") in _NO_LINE:
@@ -116,6 +124,46 @@ def _axes_pieces(axes: Mapping[str, Any]) -> tuple[list[NDArray[np.float64]],
     for patch in axes.get("patches", []) or []:
         polylines.append(_as_xy(patch.get("vertices")))
     return polylines, scattered
+
+
+def _figure_pieces(figure: Mapping[str, Any]) -> tuple[list[NDArray[np.float64]],
+                                                      list[NDArray[np.float64]]]:
+    """The polylines and point sets of every axes of ``figure`` (checked to be figure data)."""
+    if not isinstance(figure, Mapping) or not isinstance(figure.get("axes"), list):
+        raise ValueError("`figure` must be figure data: a dict with an 'axes' list.")
+    polylines: list[NDArray[np.float64]] = []
+    scattered: list[NDArray[np.float64]] = []
+    for axes in figure["axes"]:
+        if isinstance(axes, Mapping):
+            lines, points = _axes_pieces(axes)
+            polylines += lines
+            scattered += points
+    return polylines, scattered
+
+
+def curve_pieces(figure: Mapping[str, Any]) -> list[NDArray[np.float64]]:
+    """Each line, point set, collection path and patch outline of a figure, one by one.
+
+    Parameters
+    ----------
+    figure : dict
+        Figure data as decoded at the boundary (see :func:`curve_points`).
+
+    Returns
+    -------
+    list of ndarray, shape (k, 2)
+        The finite points of each drawn piece, in data coordinates and drawing
+        order (a line with NaN breaks is one piece); pieces may be empty.
+        For checks that look for one curve among several (``curve_points``
+        merges them all).
+
+    Raises
+    ------
+    ValueError
+        If ``figure`` is not a mapping with an ``"axes"`` list.
+    """
+    polylines, scattered = _figure_pieces(figure)
+    return [p[np.all(np.isfinite(p), axis=1)] for p in polylines + scattered]
 
 
 def curve_points(figure: Mapping[str, Any], *,
@@ -146,19 +194,11 @@ def curve_points(figure: Mapping[str, Any], *,
         If ``figure`` is not a mapping with an ``"axes"`` list, or
         ``samples_per_segment`` is not a positive integer.
     """
-    if not isinstance(figure, Mapping) or not isinstance(figure.get("axes"), list):
-        raise ValueError("`figure` must be figure data: a dict with an 'axes' list.")
     if isinstance(samples_per_segment, bool) or not isinstance(samples_per_segment, int) \
             or samples_per_segment < 1:
         raise ValueError(
             f"`samples_per_segment` must be a positive integer; got {samples_per_segment!r}.")
-    polylines: list[NDArray[np.float64]] = []
-    scattered: list[NDArray[np.float64]] = []
-    for axes in figure["axes"]:
-        if isinstance(axes, Mapping):
-            lines, points = _axes_pieces(axes)
-            polylines += lines
-            scattered += points
+    polylines, scattered = _figure_pieces(figure)
     vertices = sum(len(p) for p in polylines)
     samples = max(1, min(samples_per_segment, _MAX_DENSE_POINTS // max(vertices, 1)))
     parts = [_densify(p, samples) for p in polylines]
@@ -246,6 +286,28 @@ class CurveDistance:
     def worst(self) -> float:
         """The larger relative distance: the relative Hausdorff distance."""
         return max(self.forward_relative, self.backward_relative)
+
+    def gaps(self, what: str, allowed: float) -> str:
+        """What the drawing misses or adds beyond ``allowed`` (relative), for a message.
+
+        ``what`` names the reference ("car"). Empty when neither distance
+        exceeds ``allowed``; otherwise where the farthest missing reference
+        point and the farthest extra point lie, and how far they are.
+        """
+        parts = []
+        if self.forward_relative > allowed:
+            if self.forward_at is None:
+                parts.append(f"the {what} is missing from your drawing: it has no curves")
+            else:
+                x, y = self.forward_at
+                parts.append(f"parts of the {what} are missing from your drawing (the farthest "
+                             f"reference point is {self.forward:.2g} units from any of your "
+                             f"curves, near ({x:.1f}, {y:.1f}))")
+        if self.backward_relative > allowed and self.backward_at is not None:
+            x, y = self.backward_at
+            parts.append(f"your drawing has extra parts (e.g. near ({x:.1f}, {y:.1f}), "
+                         f"{self.backward:.2g} units from the reference)")
+        return "; ".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
         """The fields and ``worst`` as plain data."""

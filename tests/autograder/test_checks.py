@@ -19,7 +19,10 @@ from autograder.checks import (
     expect_array,
     expect_close,
     expect_equal,
+    expect_figure,
+    expect_indices,
     expect_int,
+    expect_number,
     explain_errors,
     figure_png,
     is_figure,
@@ -118,6 +121,81 @@ def test_expect_close_complex_and_integer_inputs():
 
 
 # ---------------------------------------------------------------------------
+# expect_close: where, array tolerances, hints
+# ---------------------------------------------------------------------------
+
+def test_expect_close_at_names_the_place_of_the_worst_entry():
+    t = np.array([0.0, 0.5, 1.0])
+    message = failure(expect_close, [0.0, 0.7, 1.0 + 1e-9], [0.0, 0.5, 1.0], rtol=0, atol=1e-6,
+                      name="p(t)", at=lambda i: f"t = {show_number(t[i])}")
+    assert message == ("p(t) is off at t = 0.5: expected 0.5, got 0.7 (error 2.00e-01, allowed "
+                       "1.00e-06); 1 of 3 value(s) are outside the tolerance.")
+
+
+def test_expect_close_at_receives_the_full_index():
+    seen = []
+
+    def at(index):
+        seen.append(index)
+        return f"row {index[0]}, column {index[1]}"
+
+    message = failure(expect_close, np.eye(2) * 2, np.eye(2), rtol=1e-9, atol=0, at=at)
+    assert "is off at row 0, column 0: expected 1, got 2" in message
+    assert seen == [(0, 0)]
+    assert "at a scalar" in failure(expect_close, 2.0, 1.0, rtol=0, atol=0,
+                                    at=lambda i: "a scalar" if i == () else "?")
+
+
+@pytest.mark.parametrize(("got", "expected", "words"), [
+    ([1.0, NAN], [1.0, 2.0], "has NaN at node 1 where 2 was expected"),
+    ([1.0, -INF], [1.0, INF], "has -inf at node 1 where +inf was expected"),
+    ([1.0, 5.0], [1.0, NAN], "has 5 at node 1 where NaN was expected"),
+])
+def test_expect_close_at_also_names_non_finite_places(got, expected, words):
+    message = failure(expect_close, got, expected, rtol=0, atol=1, at=lambda i: f"node {i[0]}",
+                      hint="Check the nodes.")
+    assert words in message and message.endswith(". Check the nodes.")
+
+
+def test_expect_close_array_atol_is_a_tolerance_per_entry():
+    want = np.array([[1.0, 100.0], [2.0, 200.0]])
+    per_column = np.array([1e-6, 1e-3])
+    expect_close(want + [[5e-7, 5e-4], [-5e-7, -5e-4]], want, rtol=0, atol=per_column)
+    message = failure(expect_close, want + [[0, 0], [2e-6, 5e-4]], want, rtol=0, atol=per_column)
+    assert "off at index [1, 0]" in message and "allowed 1.00e-06" in message
+    # the worst entry relative to its own bound is named, not the largest error
+    message = failure(expect_close, want + [[0, 9e-4], [2e-6, 0]], want, rtol=0,
+                      atol=per_column)
+    assert "off at index [1, 0]" in message
+
+
+def test_expect_close_array_rtol_and_infinite_expected_entries():
+    expect_close([INF, 1.0 + 1e-10], [INF, 1.0], rtol=[0, 1e-9], atol=0)
+    assert "off at index [1]" in failure(expect_close, [INF, 1.1], [INF, 1.0], rtol=[0, 1e-9],
+                                         atol=0)
+
+
+@pytest.mark.parametrize(("rtol", "atol", "words"), [
+    (0, [1e-9, 1e-9, 1e-9], "`atol` must be a number or an array that broadcasts"),
+    (0, -1e-9, "`atol` must be finite and >= 0"),
+    (0, NAN, "`atol` must be finite and >= 0"),
+    ([NAN, 0], 0, "`rtol` must be finite and >= 0"),
+    ("big", 0, "`rtol` must be a number or an array"),
+])
+def test_expect_close_refuses_bad_tolerances(rtol, atol, words):
+    with pytest.raises(ValueError, match=words.replace("(", r"\(")):
+        expect_close([1.0, 2.0], [1.0, 2.0], rtol=rtol, atol=atol)
+
+
+def test_expect_close_hint_ends_shape_and_value_failures():
+    hint = "Return one value per t."
+    assert failure(expect_close, [1.0], [1.0, 2.0], rtol=0, atol=0, hint=hint).endswith(hint)
+    assert failure(expect_close, [1.0, 3.0], [1.0, 2.0], rtol=0, atol=0, hint=hint).endswith(
+        "outside the tolerance. " + hint)
+    expect_close([1.0, 2.0], [1.0, 2.0], rtol=0, atol=0, hint=hint)
+
+
+# ---------------------------------------------------------------------------
 # staging: type, then shape, then values
 # ---------------------------------------------------------------------------
 
@@ -188,6 +266,58 @@ def test_expect_int_and_equal():
     assert "expected True" in failure(expect_equal, 1, True)
 
 
+@pytest.mark.parametrize(("got", "value"), [
+    (0.5, 0.5), (3, 3.0), (np.float32(0.25), 0.25), (np.int64(7), 7.0), (np.array(1.5), 1.5),
+    (NAN, NAN), (-INF, -INF),
+])
+def test_expect_number_accepts_real_scalars(got, value):
+    result = expect_number(got)
+    assert type(result) is float and (result == value or (np.isnan(value) and np.isnan(result)))
+
+
+@pytest.mark.parametrize(("got", "words"), [
+    (True, "a bool"), (None, "None"), ("0.5", "a str"), (np.array([0.5]), "shape (1,)"),
+    (np.zeros((2, 2)), "shape (2, 2)"), ([0.5], "a list of 1"), (1j, "a complex"),
+    (np.array(True), "dtype bool"),
+])
+def test_expect_number_refuses_everything_else(got, words):
+    message = failure(expect_number, got, name="p(0.3)", hint="Return float(...).")
+    assert message.startswith("p(0.3) should be a single number; got ")
+    assert words in message and message.endswith(". Return float(...).")
+
+
+def test_expect_figure_returns_figure_data_or_says_what_came_back():
+    figure = {"axes": [], "png": b""}
+    assert expect_figure(figure, name="plot(x)") is figure
+    assert failure(expect_figure, None, name="plot(x)") == (
+        "plot(x) should return the matplotlib Figure it drew on (fig, ax = plt.subplots(); "
+        "...; return fig); got None (did you forget `return`?).")
+    assert failure(expect_figure, [1], name="plot(x)", hint="no figure was drawn either"
+                   ).endswith("got a list of 1 item(s). No figure was drawn either.")
+
+
+def test_expect_indices_are_rows_of_the_table():
+    got = expect_indices([2, 0, 1], 3, shape=(None,))
+    assert got.dtype == np.int64 and got.tolist() == [2, 0, 1]
+    assert failure(expect_indices, [2, 3, -1], 3, name="hull") == (
+        "hull holds 3 at entry [1], which is not a row of `points`: it has 3 rows, so "
+        "indices run from 0 to 2.")
+    tri = np.array([[0, 1, 2], [1, -1, 2]])
+    message = failure(expect_indices, tri, 3, shape=(None, 3), name="delaunay(points)",
+                      at=lambda i: f"triangle {i[0]} {show_point(tri[i[0]])}", hint="Subtract 1?")
+    assert message == ("delaunay(points) holds -1 at triangle 1 (1, -1, 2), which is not a row "
+                       "of `points`: it has 3 rows, so indices run from 0 to 2. Subtract 1?")
+    assert "it has no rows" in failure(expect_indices, [0], 0, rows="`nodes`")
+
+
+@pytest.mark.parametrize(("got", "words"), [
+    ([0.0, 1.0], "should hold integers"), ([[0, 1]], "should have shape (any)"),
+    ("01", "should be an array-like of integers"),
+])
+def test_expect_indices_stages_before_the_range(got, words):
+    assert words in failure(expect_indices, got, 5, shape=(None,), hint="Row numbers, please.")
+
+
 def test_describe_is_short_and_safe():
     assert describe(None).startswith("None")
     assert describe(np.zeros((3, 2))) == "an array of shape (3, 2) and dtype float64"
@@ -210,6 +340,13 @@ def test_dataset_requires_a_reason_for_its_tolerance():
     assert data.build(np.random.default_rng(0)).shape == (3,)
     with pytest.raises(AttributeError):
         data.points = 3  # type: ignore[misc]  # frozen
+
+
+def test_dataset_tol_is_the_tolerance_or_an_error():
+    assert Dataset(lambda rng: 1, tolerance=1e-9, reason="rounding").tol == 1e-9
+    assert isinstance(Dataset(lambda rng: 1, tolerance=0, reason="exact").tol, float)
+    with pytest.raises(TypeError, match="no `tolerance`"):
+        Dataset(lambda rng: 1).tol
 
 
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnknownMarkWarning")

@@ -12,6 +12,7 @@ import pytest
 
 from autograder.curves import (
     CurveDistance,
+    curve_pieces,
     curve_points,
     hausdorff,
     relative_curve_distance,
@@ -79,6 +80,24 @@ def test_collections_and_patches():
     got = {tuple(p) for p in pts.tolist()}
     assert {(7, 9), (8, 10), (0.5, 0.5), (2.5, 2.5), (0.5, 0), (1, 0.5)} <= got
     assert len(pts) == 2 + (2 + 1) * 2 + (4 + 3)
+
+
+def test_curve_pieces_keeps_each_drawn_piece_apart():
+    scatter = {"kind": "PathCollection", "offsets": np.array([[7.0, 9.0], [np.nan, 1.0]]),
+               "segments": [np.array([[0.0, 0.0], [1.0, 1.0]])], "array": None}
+    pieces = curve_pieces(figure([line([0, 1, np.nan, 3], [0, 1, 2, 3]),
+                                  line([5], [5], linestyle="None")], collections=[scatter]))
+    # polylines first (the line, the collection's segment), then point sets (markers, offsets)
+    assert [p.tolist() for p in pieces] == [[[0, 0], [1, 1], [3, 3]], [[0, 0], [1, 1]],
+                                            [[5, 5]], [[7, 9]]]
+
+
+def test_figure_data_holding_garbage_gives_no_points():
+    bad = figure([{"x": "abc", "y": [1, 2]}, {"x": None, "y": None}, line([0, 1], [0, 1])])
+    assert curve_points(bad, samples_per_segment=1).tolist() == [[0, 0], [1, 1]]
+    assert [len(p) for p in curve_pieces(bad)] == [0, 0, 2]
+    with pytest.raises(ValueError, match="figure data"):
+        curve_pieces({"lines": []})
 
 
 def test_every_axes_is_read_and_empty_figures_give_no_points():
@@ -155,11 +174,19 @@ def test_relative_distance_names_missing_and_extra_parts():
     assert d.worst == pytest.approx(7.0 / 5.0)
     with pytest.raises(AttributeError):
         d.forward = 0.0  # frozen
+    assert d.gaps("triangle", 0.5) == (
+        "parts of the triangle are missing from your drawing (the farthest reference point is "
+        "4 units from any of your curves, near (3.0, 4.0)); your drawing has extra parts (e.g. "
+        "near (10.0, 0.0), 7 units from the reference)")
+    assert d.gaps("triangle", 1.0) == "your drawing has extra parts (e.g. near (10.0, 0.0), " \
+                                      "7 units from the reference)"
+    assert d.gaps("triangle", 2.0) == ""
 
 
 def test_relative_distance_without_student_points():
     d = relative_curve_distance(np.empty((0, 2)), circle(50))
     assert d.forward == math.inf and d.worst == math.inf and d.forward_at is None
+    assert d.gaps("circle", 0.02) == "the circle is missing from your drawing: it has no curves"
 
 
 def test_relative_distance_needs_a_reference():

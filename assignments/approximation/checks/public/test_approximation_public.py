@@ -14,7 +14,8 @@ import pytest
 
 import approximation_feedback as fb  # checks/public/: on sys.path while checks run
 from autograder.callbacks import traced
-from autograder.checks import Credit, Student, expect_array, expect_close
+from autograder.checks import (Credit, Student, expect_array, expect_close, expect_number,
+                               over_datasets)
 
 NODES = {
     "chebyshev-4": (4, "chebyshev", [-1.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5), 1.0]),
@@ -22,8 +23,7 @@ NODES = {
 }
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", list(NODES))
+@over_datasets(NODES, points=1)
 def test_nodes(student: Student, name: str) -> None:
     n, kind, expected = NODES[name]
     expect_close(student.interpolation_nodes(n, kind), expected, rtol=0, atol=1e-14,
@@ -47,7 +47,7 @@ def test_make_interpolant_reproduces_a_cubic(student: Student) -> None:
     assert callable(p), "make_interpolant must return a function p(t)"
     t = np.array([-0.3, 0.25, 0.9])
     expect_close(p(t), t**3 - t, rtol=0, atol=1e-14, name="p(t) for f(x) = x^3 - x, n = 3")
-    assert np.ndim(p(0.5)) == 0, "p(0.5) must be a number when t is a number"
+    expect_number(p(0.5), name="p(0.5)", hint="A number t must give a number.")
 
 
 @pytest.mark.points(1)

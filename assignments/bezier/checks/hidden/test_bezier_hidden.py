@@ -25,7 +25,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import pytest
 from scipy.interpolate import BPoly
 
 import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run
@@ -169,17 +168,12 @@ def _grade_points(student: Student, credit: Credit, rng: np.random.Generator, fn
     polygons, params = data.build(rng)
     broken = fb.CONVENTIONS.record()
     for ctrl in polygons:
-        atol = _tolerance(data) * fb.size(ctrl)
+        atol = data.tol * fb.size(ctrl)
         for t in params:
             got = fb.ask(student, fn, ctrl, t, hint=hint, timeout=TIMEOUTS.get(name))
             fb.judge_point(got, oracle_point(ctrl, t), fn=fn, ctrl=ctrl, t=t, atol=atol,
                            broken=broken, hint=hint)
     broken.finish(credit)
-
-
-def _tolerance(data: Dataset[Curves] | Dataset[list[Cut]]) -> float:
-    assert data.tolerance is not None, "every Bezier dataset has a tolerance"
-    return data.tolerance
 
 
 @over_datasets(CURVES)
@@ -223,23 +217,20 @@ def _endpoint_polygons(rng: np.random.Generator) -> list[np.ndarray]:
     return tricky + [draw() for _ in range(3)]
 
 
-def _grade_endpoints(student: Student, credit: Credit, rng: np.random.Generator,
-                     fn: str) -> None:
-    fb.grade_endpoints(student, credit, fn, _endpoint_polygons(rng), rtol=LOW_TOL)
+#: exact at t = 0 and t = 1; LOW_TOL only tells rounding from a wrong point
+ENDPOINTS: dict[str, Dataset[list[np.ndarray]]] = {"unseen": Dataset(_endpoint_polygons)}
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", ["unseen"])
+@over_datasets(ENDPOINTS)
 def test_eval_bezier_endpoints(student: Student, credit: Credit, rng: np.random.Generator,
                                name: str) -> None:
-    _grade_endpoints(student, credit, rng, "eval_bezier")
+    fb.grade_endpoints(student, credit, "eval_bezier", ENDPOINTS[name].build(rng), rtol=LOW_TOL)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", ["unseen"])
+@over_datasets(ENDPOINTS)
 def test_de_casteljau_endpoints(student: Student, credit: Credit, rng: np.random.Generator,
                                 name: str) -> None:
-    _grade_endpoints(student, credit, rng, "de_casteljau")
+    fb.grade_endpoints(student, credit, "de_casteljau", ENDPOINTS[name].build(rng), rtol=LOW_TOL)
 
 
 # ---------------------------------------------------------------------------
@@ -306,6 +297,6 @@ def test_split_bezier(student: Student, credit: Credit, rng: np.random.Generator
     broken = fb.CONVENTIONS.record()
     for ctrl, t in data.build(rng):
         fb.grade_split(student, ctrl, t, oracle_split(ctrl, t),
-                       atol=_tolerance(data) * fb.size(ctrl), broken=broken,
+                       atol=data.tol * fb.size(ctrl), broken=broken,
                        picture=feedback.image)
     broken.finish(credit)

@@ -39,6 +39,7 @@ from autograder.checks import (
     Student,
     describe,
     expect_array,
+    expect_close,
     explain_errors,
     render_png,
     show_number,
@@ -238,21 +239,17 @@ def as_point(got: object, *, fn: str, call: str, n: int, d: int,
 
 def judge_point(got: object, expected: np.ndarray, *, fn: str, ctrl: np.ndarray, t: float,
                 atol: float, broken: Broken, hint: str = "") -> None:
-    """A point within ``atol`` (max-norm) of ``expected``; raise CheckFailure otherwise."""
+    """A point within ``atol`` (each coordinate) of ``expected``; raise CheckFailure otherwise."""
     n, d = len(ctrl) - 1, ctrl.shape[1]
     call = call_text(fn, ctrl, t)
     point, where = as_point(got, fn=fn, call=call, n=n, d=d, broken=broken)
-    if not np.all(np.isfinite(point)):
-        raise CheckFailure(f"{call} returned {show_point(point)}{where}, which is not finite. "
-                           f"{hint}".rstrip())
-    err = float(np.max(np.abs(point - expected)))
-    if err > atol:
+    try:
+        expect_close(point, expected, rtol=0, atol=atol, name=f"{call}{where}",
+                     at=lambda i: f"coordinate {i[0]} of {show_point(expected, DIGITS)}")
+    except CheckFailure as off:
         note = weight_sum_note(point, ctrl[0]) if np.all(ctrl == ctrl[0]) else ""
         note = note or reversed_note(point, ctrl, t, atol)
-        raise CheckFailure(
-            f"{call} should be {show_point(expected, DIGITS)}; got {show_point(point, DIGITS)}"
-            f"{where} (off by {err:.2e}, allowed {atol:.1e}).{_endpoint_note(t, ctrl)}{note} "
-            f"{hint}".rstrip())
+        raise CheckFailure(f"{off}{_endpoint_note(t, ctrl)}{note} {hint}".rstrip()) from None
 
 
 def _endpoint_note(t: float, ctrl: np.ndarray) -> str:
@@ -436,7 +433,7 @@ def split_failure(left: np.ndarray, right: np.ndarray, ctrl: np.ndarray, t: floa
             formula = "t s" if side == "left" else "t + (1 - t) s"
             return (f"{call}: the {side} polygon does not trace its piece of the curve. At "
                     f"s = {show_number(samples[k])} its Bezier curve is at "
-                    f"{show_point(mine[k])}, but C({formula}) = C({where[k]:.6g}) = "
+                    f"{show_point(mine[k])}, but C({formula}) = C({show_number(where[k], 6)}) = "
                     f"{show_point(theirs[k])}. {SPLIT_HINT}")
     for side, poly, want in (("left", left, expected[0]), ("right", right, expected[1])):
         if off(poly, want):

@@ -12,10 +12,9 @@ worked examples of the notebook are also written out by hand below.
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import bezier_feedback as fb  # checks/public/bezier_feedback.py: on sys.path while checks run
-from autograder.checks import Credit, Feedback, Student
+from autograder.checks import Credit, Feedback, Student, over_datasets
 
 #: Allowed error, relative to the polygon's size (max |coordinate|, at least 1). Every
 #: correct evaluation of these low-degree curves (Bernstein or de Casteljau, any order of
@@ -41,11 +40,11 @@ WORKED = {
 
 #: Polygons for the exact-endpoint checks. In "tenths", P + 1.0 * (Q - P) differs from Q
 #: in the last bit (2.9 + (0.7 - 2.9) != 0.7), so only (1 - t) * P + t * Q passes at t = 1.
-ENDPOINT_POLYGONS = [
+ENDPOINTS = {"lecture-and-tenths": [
     [[0, 0], [1, 1], [1.2, 0.4]],
     [[0, 0], [4, 1], [9, 1], [3, 4]],
     [[0.3, 0.1], [0.1, 0.7], [2.9, 0.3], [0.7, 0.2]],
-]
+]}
 
 #: name -> (control points, t, left polygon, right polygon), all by hand
 SPLITS = {
@@ -79,37 +78,32 @@ def _grade_points(student: Student, credit: Credit, fn: str, name: str) -> None:
     broken.finish(credit)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", list(CURVES))
+@over_datasets(CURVES, points=1)
 def test_eval_bezier(student: Student, credit: Credit, name: str) -> None:
     _grade_points(student, credit, "eval_bezier", name)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", list(CURVES))
+@over_datasets(CURVES, points=1)
 def test_de_casteljau(student: Student, credit: Credit, name: str) -> None:
     _grade_points(student, credit, "de_casteljau", name)
 
 
-def _grade_endpoints(student: Student, credit: Credit, fn: str) -> None:
-    polygons = [np.array(raw, dtype=float) for raw in ENDPOINT_POLYGONS]
+def _grade_endpoints(student: Student, credit: Credit, fn: str, name: str) -> None:
+    polygons = [np.array(raw, dtype=float) for raw in ENDPOINTS[name]]
     fb.grade_endpoints(student, credit, fn, polygons, rtol=REL_TOL)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", ["lecture-and-tenths"])
+@over_datasets(ENDPOINTS, points=1)
 def test_eval_bezier_endpoints(student: Student, credit: Credit, name: str) -> None:
-    _grade_endpoints(student, credit, "eval_bezier")
+    _grade_endpoints(student, credit, "eval_bezier", name)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", ["lecture-and-tenths"])
+@over_datasets(ENDPOINTS, points=1)
 def test_de_casteljau_endpoints(student: Student, credit: Credit, name: str) -> None:
-    _grade_endpoints(student, credit, "de_casteljau")
+    _grade_endpoints(student, credit, "de_casteljau", name)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("name", list(SPLITS))
+@over_datasets(SPLITS, points=1)
 def test_split_bezier(student: Student, credit: Credit, feedback: Feedback, name: str) -> None:
     raw, t, left, right = SPLITS[name]
     ctrl = np.array(raw, dtype=float)

@@ -37,8 +37,10 @@ from autograder.checks import (
     call_for_figure,
     describe,
     expect_array,
-    is_figure,
+    expect_figure,
+    expect_indices,
     sentence,
+    show_number,
     show_point,
 )
 
@@ -87,16 +89,10 @@ def as_triangles(got: object) -> np.ndarray:
 
 def check_indices(tri: np.ndarray, n: int) -> None:
     """Fail on indices outside ``0..n-1``, a vertex repeated in a triangle, a triangle twice."""
-    bad = np.flatnonzero(np.any((tri < 0) | (tri >= n), axis=1))
-    if bad.size:
-        k = int(bad[0])
-        value = int(next(v for v in tri[k] if not 0 <= v < n))
-        extra = ""
-        if n <= value <= n + 2:
-            extra = (" Is it a corner of the super-triangle? Remove every triangle that "
-                     "touches one of its corners before returning.")
-        raise CheckFailure(f"Triangle {k} {show_triangle(tri[k])} uses index {value}, but "
-                           f"`points` has {n} rows, so indices run from 0 to {n - 1}.{extra}")
+    super_corner = bool(np.any((tri >= n) & (tri <= n + 2)))
+    expect_indices(tri, n, name=NAME, at=lambda i: f"triangle {i[0]} {show_triangle(tri[i[0]])}",
+                   hint="Is it a corner of the super-triangle? Remove every triangle that touches "
+                        "one of its corners before returning." if super_corner else "")
     same = np.flatnonzero((tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2])
                           | (tri[:, 0] == tri[:, 2]))
     if same.size:
@@ -316,16 +312,14 @@ def judge_figure(figure: object, points: ArrayLike, triangles: ArrayLike, u: Arr
     pts = np.asarray(points, dtype=float)
     tri = np.asarray(triangles, dtype=np.int64)
     u = np.asarray(u, dtype=float)
-    if not is_figure(figure):
-        raise CheckFailure("plot_on_mesh(points, triangles, u) should return the matplotlib "
-                           f"Figure it drew on (e.g. `return fig`); got {describe(figure)}.")
+    fig = expect_figure(figure, name="plot_on_mesh(points, triangles, u)")
     step = max(1, len(tri) // MAX_SAMPLES)
     samples = pts[tri[::step]].mean(axis=1)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     slack = 0.01 * float(np.max(hi - lo))
     best_share, misplaced = 0.0, 0
     coloured: list[FigureData] = []
-    for ax in figure["axes"]:
+    for ax in fig["axes"]:
         for coll in ax.get("collections", []):
             segments = [s for s in coll.get("segments", []) if len(s)]
             if not segments:
@@ -347,7 +341,8 @@ def judge_figure(figure: object, points: ArrayLike, triangles: ArrayLike, u: Arr
             found = f"the best filled area covers only {best_share:.0%} of the triangles"
         elif misplaced:
             found = (f"what it fills reaches outside the points, which lie in x from "
-                     f"{lo[0]:.6g} to {hi[0]:.6g} and y from {lo[1]:.6g} to {hi[1]:.6g} "
+                     f"{show_number(lo[0], 6)} to {show_number(hi[0], 6)} and y from "
+                     f"{show_number(lo[1], 6)} to {show_number(hi[1], 6)} "
                      "(x and y swapped?)")
         else:
             found = "it has no filled area"
@@ -378,8 +373,9 @@ def _check_colours(coloured: list[FigureData], u: np.ndarray) -> None:
         raise CheckFailure("The filled area of your figure has no colour data: colour the "
                            "triangles by u (tricontourf or tripcolor with u as the values).")
     cmin, cmax = ranges[0]
-    raise CheckFailure(f"The colours of your plot run from {cmin:.6g} to {cmax:.6g}, but u runs "
-                       f"from {umin:.6g} to {umax:.6g}: colour the mesh by the values u "
+    raise CheckFailure(f"The colours of your plot run from {show_number(cmin, 6)} to "
+                       f"{show_number(cmax, 6)}, but u runs from {show_number(umin, 6)} to "
+                       f"{show_number(umax, 6)}: colour the mesh by the values u "
                        "themselves, one value per point.")
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import delaunay_feedback as fb  # checks/public/delaunay_feedback.py: on sys.path while checks run
-from autograder.checks import Credit, Feedback, Student
+from autograder.checks import Credit, Feedback, Student, over_datasets
 
 HERE = Path(__file__).resolve().parent
 LAKE_CSV = HERE.parents[1] / "data" / "lake.csv"
@@ -69,8 +69,7 @@ def lake_depth(points: np.ndarray) -> np.ndarray:
     return 0.5 + 11.5 * np.exp(-((x - 460.0) ** 2 + (y - 280.0) ** 2) / (2 * 160.0 ** 2))
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(CIRCLES))
+@over_datasets(CIRCLES, "case", points=1)
 def test_in_circle_small(student: Student, credit: Credit, case: str) -> None:
     cases = []
     for a, b, c, d, where in CIRCLES[case]:
@@ -78,8 +77,7 @@ def test_in_circle_small(student: Student, credit: Credit, case: str) -> None:
     fb.judge_in_circle(cases, credit=credit)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(SMALL))
+@over_datasets(SMALL, "case", points=1)
 def test_delaunay_small(student: Student, credit: Credit, case: str) -> None:
     raw, answers = SMALL[case]
     points = np.array(raw, dtype=float)

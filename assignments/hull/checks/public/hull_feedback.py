@@ -23,8 +23,7 @@ from autograder.checks import (
     CheckFailure,
     Conventions,
     Credit,
-    describe,
-    expect_array,
+    expect_indices,
     expect_int,
     is_rotation_reversed,
     same_cycle,
@@ -60,15 +59,7 @@ def _as_indices(got: object, n: int) -> list[int]:
     if isinstance(got, (list, tuple, np.ndarray)) and len(got) == 0:
         raise CheckFailure(f"{NAME} returned an empty list; every set of pins has at least "
                            "one hull corner.")
-    arr = expect_array(got, dtype_kind="iu", name=NAME, hint=hint)
-    if arr.ndim != 1:
-        raise CheckFailure(f"{NAME} should be a flat list of indices; got {describe(got)}. "
-                           + hint)
-    bad = [int(i) for i in arr if not 0 <= int(i) < n]
-    if bad:
-        raise CheckFailure(f"{NAME} returned index {bad[0]}, which is not a row of `points`: "
-                           f"there are {n} pins, so indices run from 0 to {n - 1}.")
-    return [int(i) for i in arr]
+    return expect_indices(got, n, shape=(None,), name=NAME, hint=hint).tolist()
 
 
 def _collapse_repeats(walk: list[int]) -> list[int]:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
-from autograder.checks import Credit, Student
+from autograder.checks import Credit, Student, over_datasets
 
 PINS_CSV = Path(__file__).resolve().parents[2] / "data" / "pins.csv"
 
@@ -62,8 +62,7 @@ PINS_HULL = [12, 5, 4, 7, 14, 26, 8, 28]
 PINS_BOUNDARY = [12, 5, 4, 1, 7, 14, 26, 15, 8, 28]
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(TURNS))
+@over_datasets(TURNS, "case", points=1)
 def test_orientation_small(student: Student, case: str) -> None:
     if case == "collinear":
         feedback.require_general_turns(student.orientation, "collinear cases")
@@ -71,8 +70,7 @@ def test_orientation_small(student: Student, case: str) -> None:
         feedback.judge_turn(student.orientation(p, q, r), p, q, r, expected)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(HULLS))
+@over_datasets(HULLS, "case", points=1)
 def test_convex_hull_small(student: Student, credit: Credit, case: str) -> None:
     raw, expected, boundary = HULLS[case]
     points = np.array(raw, dtype=float)

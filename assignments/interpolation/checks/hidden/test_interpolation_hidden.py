@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from numpy.typing import ArrayLike
 from scipy.interpolate import barycentric_interpolate as scipy_barycentric
 
 import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
@@ -70,10 +69,6 @@ def unseen_degree(rng: np.random.Generator, low: int, high: int, *, odd: bool = 
     return int(rng.choice(choices))
 
 
-def runge(x: ArrayLike) -> np.ndarray:
-    return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
-
-
 def tolerance(x: np.ndarray, f: np.ndarray) -> float:
     """SLACK times Higham's forward error bound for these nodes and data."""
     lam = lebesgue_constant(x)
@@ -85,14 +80,10 @@ def tolerance(x: np.ndarray, f: np.ndarray) -> float:
 # nodes
 # ---------------------------------------------------------------------------
 
-FIRST_KIND = ("these are Chebyshev points of the first kind (the roots of T_{n+1}), which "
-              "stop short of -1 and 1; the assignment asks for the second kind, "
-              "x_j = -cos(j pi / n), j = 0, ..., n.")
-
 NODE_FAMILIES = {
     "equispaced": (equispaced_nodes, "equispaced nodes", lambda n: {}),
     "chebyshev": (chebyshev_nodes, "Chebyshev nodes",
-                  lambda n: {FIRST_KIND: chebyshev_nodes(n, kind=1)}),
+                  lambda n: {fb.FIRST_KIND: chebyshev_nodes(n, kind=1)}),
 }
 
 #: name -> degree (from the rng for unseen); tolerance: NODE_ATOL of interp_feedback.py
@@ -120,16 +111,6 @@ def test_nodes(student: Student, credit: Credit, rng: np.random.Generator, famil
 # weights
 # ---------------------------------------------------------------------------
 
-NOT_HALVED = ("the end weights must be halved: w_j = (-1)^j for 0 < j < n, and "
-              "w_0 = 1/2, w_n = (-1)^n / 2.")
-CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equispaced nodes "
-                            "need w_j = (-1)^j C(n, j).")
-
-
-def _alternating(n: int) -> np.ndarray:
-    return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
-
-
 #: name -> (family, degree); tolerances: WEIGHT_RTOL and WEIGHT_ATOL of interp_feedback.py
 WEIGHT_CASES: dict[str, Dataset[tuple[str, int]]] = {
     "equispaced-degree-1": Dataset(lambda rng: ("equispaced", 1)),
@@ -147,9 +128,9 @@ WEIGHT_CASES: dict[str, Dataset[tuple[str, int]]] = {
 
 WEIGHT_FAMILIES = {
     "equispaced": (equispaced_weights, fb.EQUISPACED_HINT,
-                   lambda n: {CHEBYSHEV_FOR_EQUISPACED: _alternating(n)} if n > 2 else {}),
+                   lambda n: {fb.CHEBYSHEV_FOR_EQUISPACED: fb.alternating(n)} if n > 2 else {}),
     "chebyshev": (chebyshev_weights, fb.CHEBYSHEV_HINT,
-                  lambda n: {NOT_HALVED: _alternating(n)}),
+                  lambda n: {fb.NOT_HALVED: fb.alternating(n)}),
 }
 
 
@@ -194,14 +175,14 @@ def _lecture_runge(rng: np.random.Generator) -> Problem:
     n = 15
     x = equispaced_nodes(n)
     w = np.array([(-1) ** j * math.comb(n, j) for j in range(n + 1)], dtype=float)
-    return Problem(x, w, runge(x), rng.uniform(-1, 1, 257),
+    return Problem(x, w, fb.runge(x), rng.uniform(-1, 1, 257),
                    "Runge's function in 16 equispaced nodes, the lecture's weights (-1)^j C(15, j)")
 
 
 def _scaled_chebyshev(rng: np.random.Generator) -> Problem:
     n = 25
     x = chebyshev_nodes(n)
-    return Problem(x, 3.7 * chebyshev_weights(n), runge(x), rng.uniform(-1, 1, 400),
+    return Problem(x, 3.7 * chebyshev_weights(n), fb.runge(x), rng.uniform(-1, 1, 400),
                    "Runge's function in 26 Chebyshev points, weights 3.7 (-1)^j, halved at "
                    "the ends")
 
@@ -238,7 +219,7 @@ def _unseen_abs(rng: np.random.Generator) -> Problem:
 def _unseen_equispaced(rng: np.random.Generator) -> Problem:
     n = unseen_degree(rng, 5, 28)
     x = equispaced_nodes(n)
-    return Problem(x, equispaced_weights(n) * 2.0**-20, runge(x),
+    return Problem(x, equispaced_weights(n) * 2.0**-20, fb.runge(x),
                    rng.uniform(-1, 1, unseen_degree(rng, 60, 300)),
                    f"Runge's function in {n + 1} equispaced nodes")
 
@@ -288,12 +269,12 @@ def test_interp_shapes(student: Student, credit: Credit, rng: np.random.Generato
     n = 8
     x, w = chebyshev_nodes(n), chebyshev_weights(n)
     t = SHAPES[shape].build(rng)
-    got = student.lagrange_interp(runge(x), x, w, t)
+    got = student.lagrange_interp(fb.runge(x), x, w, t)
     call = f"lagrange_interp(f, x, w, t) with t of shape {np.shape(t)}"
     if np.ndim(t) == 0:
         got = fb.judge_scalar(got, call=call, credit=credit)
-    fb.judge_values(got, barycentric_interpolate(x, runge(x), t, w), t=np.asarray(t),
-                    nodes=x, tol=tolerance(x, runge(x)), credit=credit, call=call)
+    fb.judge_values(got, barycentric_interpolate(x, fb.runge(x), t, w), t=np.asarray(t),
+                    nodes=x, tol=tolerance(x, fb.runge(x)), credit=credit, call=call)
 
 
 # ---------------------------------------------------------------------------
@@ -305,7 +286,7 @@ def test_interp_shapes(student: Student, credit: Credit, rng: np.random.Generato
 def test_exact_at_all_nodes(student: Student, rng: np.random.Generator) -> None:
     n = unseen_degree(rng, 5, 60)
     x = equispaced_nodes(n)
-    f = runge(x)
+    f = fb.runge(x)
     order = rng.permutation(n + 1)
     got = student.lagrange_interp(f, x, 1000.0 * equispaced_weights(n), x[order])
     fb.judge_exact(got, f, x, order, call=f"lagrange_interp(f, x, w, t=x) with {n + 1} "
@@ -357,7 +338,7 @@ def _next_to_zero(rng: np.random.Generator) -> NearCase:
     n = 16
     x = equispaced_nodes(n)  # node 8 is exactly 0
     t = np.array([5e-324, -5e-324, 2.5e-320, 1e-310, -3e-308])
-    return x, equispaced_weights(n), runge(x), t, "17 equispaced nodes, t next to the node 0"
+    return x, equispaced_weights(n), fb.runge(x), t, "17 equispaced nodes, t next to the node 0"
 
 
 NEAR: dict[str, Dataset[NearCase]] = {
@@ -385,7 +366,7 @@ def _interpolant(family: str, m: int) -> Callable[[np.ndarray], np.ndarray]:
     nodes, weights = {"equispaced": (equispaced_nodes, equispaced_weights),
                       "Chebyshev": (chebyshev_nodes, chebyshev_weights)}[family]
     x, w = nodes(m), weights(m)
-    return lambda s: barycentric_interpolate(x, runge(x), s, w)
+    return lambda s: barycentric_interpolate(x, fb.runge(x), s, w)
 
 
 #: the degree n of each plot; curves are found within CURVE_RTOL of interp_feedback.py
@@ -398,14 +379,4 @@ PLOTS: dict[str, Dataset[int]] = {
 @over_datasets(PLOTS, "case")
 def test_plot_runge(student: Student, credit: Credit, feedback: Feedback,
                     rng: np.random.Generator, case: str) -> None:
-    n = PLOTS[case].build(rng)
-    figure, note, call = fb.draw_runge_plot(student, feedback, n)
-    wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
-              fb.Curve("the equispaced interpolant", _interpolant("equispaced", n)),
-              fb.Curve("the Chebyshev interpolant", _interpolant("Chebyshev", n))]
-    nearby = {f"the {family} interpolant": [
-        fb.Curve(f"the {family} interpolant of degree {m} ({m + 1} nodes), but {call} asks "
-                 f"for degree {n} ({n + 1} nodes)", _interpolant(family, m))
-        for m in (n - 1, n + 1)] for family in ("equispaced", "Chebyshev")}
-    fb.judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit,
-                        note=note)
+    fb.grade_runge_plot(student, feedback, credit, PLOTS[case].build(rng), _interpolant)

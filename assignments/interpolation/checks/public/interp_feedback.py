@@ -27,8 +27,12 @@ from autograder.checks import (
     FigureData,
     Student,
     call_for_figure,
+    curve_pieces,
     describe,
     expect_array,
+    expect_close,
+    expect_figure,
+    expect_number,
     explain_errors,
     sentences,
     show_number,
@@ -85,6 +89,25 @@ EQUISPACED_HINT = (
 CHEBYSHEV_HINT = ("Chebyshev weights need no large numbers: w_j = (-1)^j, halved for j = 0 "
                   "and j = n.")
 
+#: Known wrong answers, named (public and hidden checks compare with them).
+FIRST_KIND = ("these are Chebyshev points of the first kind (the roots of T_{n+1}), which "
+              "stop short of -1 and 1; the assignment asks for the second kind, "
+              "x_j = -cos(j pi / n), j = 0, ..., n.")
+NOT_HALVED = ("the end weights must be halved: w_j = (-1)^j for 0 < j < n, and "
+              "w_0 = 1/2, w_n = (-1)^n / 2.")
+CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equispaced nodes "
+                            "need w_j = (-1)^j C(n, j).")
+
+
+def alternating(n: int) -> np.ndarray:
+    """``(-1)^j`` for j = 0, ..., n: Chebyshev weights that forgot to halve the ends."""
+    return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
+
+
+def runge(x: ArrayLike) -> np.ndarray:
+    """Runge's function of the notebook, 1 / (1 + 16 x^2)."""
+    return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
+
 
 # ---------------------------------------------------------------------------
 # calling the student
@@ -125,25 +148,24 @@ def judge_nodes(got: object, expected: np.ndarray, *, call: str, what: str, cred
         raise CheckFailure(f"{call} returned {arr.size} nodes; degree n = {m - 1} needs "
                            f"n + 1 = {m} nodes.{hint}")
     arr = arr.astype(float)
-    bad = np.flatnonzero(~np.isfinite(arr))
-    if bad.size:
-        raise CheckFailure(f"{call}: node {bad[0]} is {arr[bad[0]]}; every node must be a "
-                           "finite number in [-1, 1].")
-    if _close(arr, expected, NODE_ATOL):
-        return
-    if m > 1 and _close(arr, expected[::-1], NODE_ATOL):
-        fix = " (x_j = -cos(j pi / n) rises from -1 to 1; cos(j pi / n) falls)" \
-            if "Chebyshev" in what else ""
-        CONVENTIONS.partial(credit, "descending",
-                            f"{call}: your {what} are in descending order; the assignment "
-                            f"asks for ascending{fix}.")
-    for message, wrong in (known or {}).items():
-        if _close(arr, np.asarray(wrong, dtype=float), NODE_ATOL):
-            raise CheckFailure(f"{call}: {message}")
-    raise CheckFailure(_nodes_mismatch(arr, expected, call=call))
+    try:
+        expect_close(arr, expected, rtol=0, atol=NODE_ATOL, name=call,
+                     at=lambda i: f"node {i[0]}", hint=_node_hints(arr, expected))
+    except CheckFailure:
+        if m > 1 and _close(arr, expected[::-1], NODE_ATOL):
+            fix = " (x_j = -cos(j pi / n) rises from -1 to 1; cos(j pi / n) falls)" \
+                if "Chebyshev" in what else ""
+            CONVENTIONS.partial(credit, "descending",
+                                f"{call}: your {what} are in descending order; the assignment "
+                                f"asks for ascending{fix}.")
+        for message, wrong in (known or {}).items():
+            if _close(arr, np.asarray(wrong, dtype=float), NODE_ATOL):
+                raise CheckFailure(f"{call}: {message}") from None
+        raise
 
 
-def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
+def _node_hints(arr: np.ndarray, expected: np.ndarray) -> str:
+    """What is wrong with the nodes as a whole: their range, their order."""
     parts: list[str] = []
     if abs(arr[0] - expected[0]) > NODE_ATOL or abs(arr[-1] - expected[-1]) > NODE_ATOL:
         parts.append(f"the nodes should run from {show_number(expected[0])} to "
@@ -154,12 +176,7 @@ def _nodes_mismatch(arr: np.ndarray, expected: np.ndarray, *, call: str) -> str:
         j = int(steps[0])
         parts.append(f"the nodes must be ascending, but node {j + 1} ({show_number(arr[j + 1])}) "
                      f"is not larger than node {j} ({show_number(arr[j])})")
-    err = np.abs(arr - expected)
-    j = int(np.argmax(err))
-    parts.append(f"node {j} is {show_number(arr[j])}, expected {show_number(expected[j])} (error "
-                 f"{err[j]:.2e}, allowed {NODE_ATOL:.0e}); {int((err > NODE_ATOL).sum())} of "
-                 f"{arr.size} nodes are off")
-    return f"{call}: " + "; ".join(parts) + "."
+    return sentences(parts)
 
 
 # ---------------------------------------------------------------------------
@@ -194,28 +211,27 @@ def judge_weights(got: object, expected: np.ndarray, *, call: str, n: int, hint:
                            f"but weight {k} is the largest in exact arithmetic. Scale the "
                            f"weights so that the largest is about 1. {hint}")
     ratio, want = arr / arr[k], expected / expected[k]
-    err = np.abs(ratio - want)
-    over = err > WEIGHT_RTOL * np.abs(want) + WEIGHT_ATOL
-    if not over.any():
-        return
-    for message, wrong in (known or {}).items():
-        wrong = np.asarray(wrong, dtype=float)
-        if np.allclose(ratio, wrong / wrong[k], rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL):
-            raise CheckFailure(f"{call}: {message}")
-    flipped = np.flatnonzero((ratio != 0) & (np.abs(want) > WEIGHT_ATOL)
-                             & (np.sign(ratio) != np.sign(want)))
-    if flipped.size:
-        j = int(flipped[0])
-        raise CheckFailure(f"{call}: weight {j} has the wrong sign: the weights alternate in "
-                           f"sign, w_j = (-1)^j |w_j| (a common factor, even -1, is fine); "
-                           f"{flipped.size} of {m} weights have the wrong sign.")
-    j = int(np.flatnonzero(over)[0])
-    zero = (f" It is 0: it underflowed although its true size, {want[j]:.3g} times the "
-            f"largest, is a normal double." if ratio[j] == 0 else "")
-    raise CheckFailure(
-        f"{call}: weight {j} divided by weight {k} (the largest) should be "
-        f"{want[j]:.12g}; yours is {ratio[j]:.12g}. Only ratios matter (any common scale "
-        f"is fine); {int(over.sum())} of {m} ratios are off.{zero}")
+    under = np.flatnonzero((ratio == 0) & (np.abs(want) > WEIGHT_ATOL))
+    zero = (f"Weight {under[0]} is 0: it underflowed although its true size, "
+            f"{want[under[0]]:.3g} times the largest, is a normal double." if under.size else "")
+    try:
+        expect_close(ratio, want, rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL,
+                     name=f"{call} divided by weight {k} (the largest)",
+                     at=lambda i: f"weight {i[0]}",
+                     hint=sentences(["only ratios matter (any common scale is fine)", zero]))
+    except CheckFailure:
+        for message, wrong in (known or {}).items():
+            wrong = np.asarray(wrong, dtype=float)
+            if np.allclose(ratio, wrong / wrong[k], rtol=WEIGHT_RTOL, atol=WEIGHT_ATOL):
+                raise CheckFailure(f"{call}: {message}") from None
+        flipped = np.flatnonzero((ratio != 0) & (np.abs(want) > WEIGHT_ATOL)
+                                 & (np.sign(ratio) != np.sign(want)))
+        if flipped.size:
+            raise CheckFailure(f"{call}: weight {flipped[0]} has the wrong sign: the weights "
+                               f"alternate in sign, w_j = (-1)^j |w_j| (a common factor, even "
+                               f"-1, is fine); {flipped.size} of {m} weights have the wrong "
+                               "sign.") from None
+        raise
 
 
 # ---------------------------------------------------------------------------
@@ -277,22 +293,19 @@ def judge_values(got: object, expected: ArrayLike, *, t: ArrayLike, nodes: np.nd
         raise CheckFailure(f"{call} returned {flat[i]} at {_where(tt[i], nodes)} (entry {i}); "
                            f"expected {want[i]:.15g}. {bad.size} of {flat.size} values are not "
                            "finite." + _nan_hint(tt[i], nodes))
-    err = np.abs(flat - want)
-    if np.all(err <= tol):
-        return
-    c = scale_factor(flat, want, ~np.isin(tt, nodes))
-    if c is not None:
-        CONVENTIONS.partial(credit, "first-form",
-                            f"{call}: every value is {c:.6g} times the interpolant. That is "
-                            "what the first barycentric form l(t) sum_j w_j f_j / (t - x_j) "
-                            "gives when the weights come at another scale. The weights may "
-                            "have any common scale: divide by sum_j w_j / (t - x_j) (the "
-                            "second form), and the scale cancels.")
-    i = int(np.argmax(err))
-    raise CheckFailure(f"{call} is off at {_where(tt[i], nodes)} (entry {i}): expected "
-                       f"{want[i]:.15g}, got {flat[i]:.15g} (error {err[i]:.2e}, allowed "
-                       f"{tol:.2e}); {int((err > tol).sum())} of {flat.size} values are outside "
-                       "the tolerance.")
+    try:
+        expect_close(flat, want, rtol=0, atol=tol, name=call,
+                     at=lambda i: f"{_where(tt[i[0]], nodes)} (entry {i[0]})")
+    except CheckFailure:
+        c = scale_factor(flat, want, ~np.isin(tt, nodes))
+        if c is not None:
+            CONVENTIONS.partial(credit, "first-form",
+                                f"{call}: every value is {show_number(c, 6)} times the interpolant. That is "
+                                "what the first barycentric form l(t) sum_j w_j f_j / (t - x_j) "
+                                "gives when the weights come at another scale. The weights may "
+                                "have any common scale: divide by sum_j w_j / (t - x_j) (the "
+                                "second form), and the scale cancels.")
+        raise
 
 
 def _nan_hint(t: float, nodes: np.ndarray) -> str:
@@ -326,17 +339,16 @@ def judge_exact(got: object, fvals: np.ndarray, nodes: np.ndarray, index: np.nda
 
 def judge_scalar(got: object, *, call: str, credit: Credit) -> float:
     """A scalar ``t`` gives a scalar: a float, or a 0-d array. Returns the value."""
-    if isinstance(got, bool) or got is None or isinstance(got, (str, dict)):
-        raise CheckFailure(f"{call} should return a number for a scalar t; got {describe(got)}.")
-    arr = expect_array(got, dtype_kind="iuf", name=call)
-    if arr.ndim == 0:
-        return float(arr)
-    if arr.size == 1:
+    try:
+        arr = np.asarray(got) if isinstance(got, (list, tuple, np.ndarray)) else None
+    except ValueError:  # ragged
+        arr = None
+    if arr is not None and arr.ndim and arr.size == 1 and arr.dtype.kind in "iuf":
         CONVENTIONS.partial(credit, "array-for-scalar",
                             f"{call} returned {describe(got)} for a scalar t; return a scalar "
                             "(a float) when t is a scalar, e.g. with float(...) or result[()] "
                             "on a 0-d array.")
-    raise CheckFailure(f"{call} should return one number for a scalar t; got {describe(got)}.")
+    return expect_number(got, name=call, hint="A scalar t gives one number.")
 
 
 # ---------------------------------------------------------------------------
@@ -359,37 +371,36 @@ def draw_runge_plot(student: Student, feedback: Feedback, n: int) -> tuple[Figur
     call = f"plot_runge({n})"
     value, figure = call_for_figure(student, "plot_runge", n, feedback=feedback)
     if figure is None:
-        raise CheckFailure(f"{call} should return a matplotlib Figure (fig, ax = "
-                           f"plt.subplots(); ...; return fig); got {describe(value)} and no "
-                           "figure was drawn.")
+        figure = expect_figure(value, name=call, hint="no figure was drawn either")
     if figure is value:
         return figure, "", call
     return figure, (f"{call} returned {describe(value)}, not the Figure; it drew one, so I "
                     "graded that, but end plot_runge with `return fig`."), call
 
 
+def grade_runge_plot(student: Student, feedback: Feedback, credit: Credit, n: int,
+                     interpolant: Callable[[str, int], Callable[[np.ndarray], ArrayLike]]) -> None:
+    """Call ``plot_runge(n)`` and find Runge's function and its two interpolants of degree n.
+
+    ``interpolant(family, m)`` is the interpolant of degree ``m`` in the
+    ``"equispaced"`` or ``"Chebyshev"`` nodes; those of degree n - 1 and n + 1
+    only sharpen the message (a common off-by-one).
+    """
+    figure, note, call = draw_runge_plot(student, feedback, n)
+    families = ("equispaced", "Chebyshev")
+    wanted = [Curve("Runge's function 1/(1 + 16x^2)", runge)]
+    wanted += [Curve(f"the {family} interpolant", interpolant(family, n)) for family in families]
+    nearby = {f"the {family} interpolant": [
+        Curve(f"the {family} interpolant of degree {m} ({m + 1} nodes), but {call} asks for "
+              f"degree {n} ({n + 1} nodes)", interpolant(family, m)) for m in (n - 1, n + 1)]
+        for family in families}
+    judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit, note=note)
+
+
 def drawn_curves(figure: FigureData) -> list[tuple[np.ndarray, np.ndarray]]:
     """(x, y) of every line or point set with ``MIN_CURVE_POINTS`` finite points at distinct x."""
-    pieces: list[tuple[object, object]] = []
-    for axes in figure.get("axes", []) or []:
-        for line in axes.get("lines", []) or []:
-            pieces.append((line.get("x", []), line.get("y", [])))
-        for coll in axes.get("collections", []) or []:
-            for xy in [coll.get("offsets")] + list(coll.get("segments", []) or []):
-                xy = np.asarray(xy if xy is not None else [], dtype=float)
-                if xy.ndim == 2 and xy.shape[1] == 2:
-                    pieces.append((xy[:, 0], xy[:, 1]))
-    curves = []
-    for x, y in pieces:
-        try:
-            x, y = np.ravel(np.asarray(x, dtype=float)), np.ravel(np.asarray(y, dtype=float))
-        except (TypeError, ValueError):
-            continue
-        k = min(x.size, y.size)
-        ok = np.isfinite(x[:k]) & np.isfinite(y[:k])
-        if np.unique(x[:k][ok]).size >= MIN_CURVE_POINTS:
-            curves.append((x[:k][ok], y[:k][ok]))
-    return curves
+    return [(xy[:, 0], xy[:, 1]) for xy in curve_pieces(figure)
+            if np.unique(xy[:, 0]).size >= MIN_CURVE_POINTS]
 
 
 def curve_error(curve: tuple[np.ndarray, np.ndarray],
@@ -431,8 +442,8 @@ def judge_runge_plot(figure: FigureData, *, call: str, wanted: Sequence[Curve],
                 score += share
             else:
                 score += share / 2
-                parts.append(f"{curve.name} in your plot covers only [{x.min():.3g}, "
-                             f"{x.max():.3g}]; draw it over the whole interval [-1, 1]")
+                parts.append(f"{curve.name} in your plot covers only [{show_number(x.min(), 3)}, "
+                             f"{show_number(x.max(), 3)}]; draw it over the whole interval [-1, 1]")
             continue
         parts.append(_missing(curve, curves, errors, best, (nearby or {}).get(curve.name, ())))
     if note:
@@ -458,4 +469,4 @@ def _missing(curve: Curve, curves: list[tuple[np.ndarray, np.ndarray]],
         if any(curve_error(c, other.fn)[0] <= CURVE_RTOL for c in curves):
             return text + f"; one of your curves is {other.name}"
     err, x = errors[best]
-    return text + f" (the closest one is off by {err:.2g} at x = {x:.3g})"
+    return text + f" (the closest one is off by {err:.2g} at x = {show_number(x, 3)})"

@@ -21,11 +21,7 @@ import pytest
 from numpy.typing import ArrayLike
 
 import interp_feedback as fb  # checks/public/interp_feedback.py: on sys.path while checks run
-from autograder.checks import Credit, Feedback, Student
-
-
-def runge(x: ArrayLike) -> np.ndarray:
-    return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
+from autograder.checks import Credit, Feedback, Student, over_datasets
 
 
 def cheb2(n: int) -> np.ndarray:
@@ -39,29 +35,19 @@ def cheb1(n: int) -> np.ndarray:
 
 
 def fitted(nodes: ArrayLike,
-           f: Callable[[ArrayLike], np.ndarray] = runge) -> np.polynomial.Polynomial:
+           f: Callable[[ArrayLike], np.ndarray] = fb.runge) -> np.polynomial.Polynomial:
     """The polynomial through (nodes, f(nodes)), by an exact least-squares fit."""
     nodes = np.asarray(nodes, dtype=float)
     return np.polynomial.Polynomial.fit(nodes, f(nodes), deg=nodes.size - 1)
 
 
-FIRST_KIND = ("these are Chebyshev points of the first kind (the roots of T_{n+1}), which "
-              "stop short of -1 and 1; the assignment asks for the second kind, "
-              "x_j = -cos(j pi / n), j = 0, ..., n.")
-
 #: name -> (function, n, expected nodes, known wrong answers)
 NODES = {
     "equispaced-4": ("equispaced_nodes", 4, [-1.0, -0.5, 0.0, 0.5, 1.0], {}),
     "chebyshev-4": ("chebyshev_nodes", 4, [-1.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5), 1.0],
-                    {FIRST_KIND: cheb1(4)}),
-    "chebyshev-7": ("chebyshev_nodes", 7, cheb2(7), {FIRST_KIND: cheb1(7)}),
+                    {fb.FIRST_KIND: cheb1(4)}),
+    "chebyshev-7": ("chebyshev_nodes", 7, cheb2(7), {fb.FIRST_KIND: cheb1(7)}),
 }
-
-NOT_HALVED = ("the end weights must be halved: w_j = (-1)^j for 0 < j < n, and "
-              "w_0 = 1/2, w_n = (-1)^n / 2.")
-CHEBYSHEV_FOR_EQUISPACED = ("these are Chebyshev weights (alternating +-1); equispaced nodes "
-                            "need w_j = (-1)^j C(n, j).")
-
 
 def _equispaced_ratios(n: int) -> np.ndarray:
     """(-1)^j C(n, j) / C(n, n // 2), each correctly rounded (exact integers divided)."""
@@ -69,23 +55,18 @@ def _equispaced_ratios(n: int) -> np.ndarray:
     return np.array([(-1) ** j * (math.comb(n, j) / top) for j in range(n + 1)])
 
 
-def _alternating(n: int) -> np.ndarray:
-    return np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
-
-
 #: name -> (function, n, expected weights at any scale, overflow hint, known wrong answers)
 WEIGHTS = {
     "equispaced-4": ("equispaced_weights", 4, [1.0, -4.0, 6.0, -4.0, 1.0], fb.EQUISPACED_HINT,
-                     {CHEBYSHEV_FOR_EQUISPACED: _alternating(4)}),
+                     {fb.CHEBYSHEV_FOR_EQUISPACED: fb.alternating(4)}),
     "chebyshev-4": ("chebyshev_weights", 4, [0.5, -1.0, 1.0, -1.0, 0.5], fb.CHEBYSHEV_HINT,
-                    {NOT_HALVED: _alternating(4)}),
+                    {fb.NOT_HALVED: fb.alternating(4)}),
     "equispaced-1100": ("equispaced_weights", 1100, _equispaced_ratios(1100),
                         fb.EQUISPACED_HINT, {}),
 }
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(NODES))
+@over_datasets(NODES, "case", points=1)
 def test_nodes_small(student: Student, credit: Credit, case: str) -> None:
     name, n, expected, known = NODES[case]
     got = getattr(student, name)(n)
@@ -94,8 +75,7 @@ def test_nodes_small(student: Student, credit: Credit, case: str) -> None:
                    credit=credit, known=known)
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(WEIGHTS))
+@over_datasets(WEIGHTS, "case", points=1)
 def test_weights_small(student: Student, case: str) -> None:
     name, n, expected, hint, known = WEIGHTS[case]
     call = f"{name}({n})"
@@ -120,7 +100,7 @@ def test_interp_runge_chebyshev_10(student: Student, credit: Credit) -> None:
     w = np.where(np.arange(11) % 2 == 0, 1.0, -1.0)
     w[[0, -1]] *= 0.5
     t = np.linspace(-1.0, 1.0, 201)
-    got = student.lagrange_interp(runge(x), x, w, t)
+    got = student.lagrange_interp(fb.runge(x), x, w, t)
     # tolerance: the fit is accurate to about 1e-13, the barycentric formula to 1e-15
     fb.judge_values(got, fitted(x)(t), t=t, nodes=x, tol=1e-11, credit=credit,
                     call="lagrange_interp(f(x), x, w, t) with 11 Chebyshev points")
@@ -139,7 +119,7 @@ def test_interp_scalar(student: Student, credit: Credit) -> None:
 def test_interp_exact_at_nodes(student: Student) -> None:
     """At the nodes the answer is the data itself, bit for bit (the lecture's weights)."""
     x = np.linspace(-1.0, 1.0, 5)
-    f, w = runge(x), np.array([1.0, -4.0, 6.0, -4.0, 1.0])
+    f, w = fb.runge(x), np.array([1.0, -4.0, 6.0, -4.0, 1.0])
     got = student.lagrange_interp(f, x, w, x)
     fb.judge_exact(got, f, x, np.arange(5), call="lagrange_interp(f, x, w, t=x)")
     for j in (1, 3):
@@ -148,18 +128,11 @@ def test_interp_exact_at_nodes(student: Student) -> None:
                        call=f"lagrange_interp(f, x, w, t={x[j]})")
 
 
+#: the nodes of each family, by degree
+FAMILIES = {"equispaced": lambda m: np.linspace(-1.0, 1.0, m + 1), "Chebyshev": cheb2}
+
+
 @pytest.mark.points(2)
 def test_plot_runge_10(student: Student, credit: Credit, feedback: Feedback) -> None:
-    n = 10
-    figure, note, call = fb.draw_runge_plot(student, feedback, n)
-    equispaced, chebyshev = np.linspace(-1.0, 1.0, n + 1), cheb2(n)
-    wanted = [fb.Curve("Runge's function 1/(1 + 16x^2)", runge),
-              fb.Curve("the equispaced interpolant", fitted(equispaced)),
-              fb.Curve("the Chebyshev interpolant", fitted(chebyshev))]
-    families = {"equispaced": lambda k: np.linspace(-1.0, 1.0, k + 1), "Chebyshev": cheb2}
-    nearby = {f"the {name} interpolant": [
-        fb.Curve(f"the {name} interpolant of degree {m} ({m + 1} nodes), but {call} asks for "
-                 f"degree {n} ({n + 1} nodes)", fitted(nodes(m))) for m in (n - 1, n + 1)]
-        for name, nodes in families.items()}
-    fb.judge_runge_plot(figure, call=call, wanted=wanted, nearby=nearby, credit=credit,
-                        note=note)
+    fb.grade_runge_plot(student, feedback, credit, 10,
+                        lambda family, m: fitted(FAMILIES[family](m)))

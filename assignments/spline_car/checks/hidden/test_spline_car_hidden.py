@@ -26,8 +26,9 @@ from autograder.checks import (
     Dataset,
     Feedback,
     Student,
-    describe,
+    expect_number,
     over_datasets,
+    show_number,
 )
 from reference import CubicSpline, car
 
@@ -120,18 +121,12 @@ DATASETS: dict[str, Dataset[Data]] = {
 }
 
 
-def _rtol(name: str) -> float:
-    tolerance = DATASETS[name].tolerance
-    assert tolerance is not None, f"dataset {name} has no tolerance"
-    return tolerance
-
-
 @over_datasets(DATASETS)
 def test_spline_coefficients(student: Student, credit: Credit, rng: np.random.Generator,
                              name: str) -> None:
     x, y = DATASETS[name].build(rng)
     got = student.spline_coefficients(x, y)
-    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=_rtol(name))
+    judge.grade_coefficients(got, x, y, expected_rows(x, y), credit, rtol=DATASETS[name].tol)
 
 
 def _check_property(student: Student, credit: Credit, rng: np.random.Generator, name: str,
@@ -139,7 +134,7 @@ def _check_property(student: Student, credit: Credit, rng: np.random.Generator, 
     """One property of the student's spline of a point set, read from its coefficients."""
     x, y = DATASETS[name].build(rng)
     reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
-    check(reading, x, y, _rtol(name))
+    check(reading, x, y, DATASETS[name].tol)
     judge.finish(reading, credit)
 
 
@@ -214,8 +209,7 @@ def _looks_like(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, reading: j
     return ""
 
 
-@pytest.mark.points(2)
-@pytest.mark.parametrize("name", list(FUNCTIONS))
+@over_datasets(FUNCTIONS, points=2)
 def test_convergence(student: Student, credit: Credit, name: str) -> None:
     f, a, b = FUNCTIONS[name]
     margin = INTERIOR * (b - a)
@@ -320,12 +314,9 @@ def test_spline_eval_scalar(student: Student, credit: Credit,
     x, y = DATASETS["random-12"].build(rng)  # fixed data: the rng is not used
     rows = expected_rows(x, y)
     t = float(0.5 * (x[4] + x[5]))
-    got = student.spline_eval(x, rows, t)
-    value = got.item() if isinstance(got, np.ndarray) and got.ndim == 0 else got
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise CheckFailure(f"spline_eval(x, coeffs, t) with a single number t = {t:.4g} should "
-                           f"return a single number; got {describe(got)}.")
-    judge.grade_eval(np.array(float(value)), x, np.array(t), evaluate(rows, x, np.array(t)),
+    value = expect_number(student.spline_eval(x, rows, t),
+                          name=f"spline_eval(x, coeffs, t) with a single number t = {show_number(t, 4)}")
+    judge.grade_eval(np.array(value), x, np.array(t), evaluate(rows, x, np.array(t)),
                      rtol=EVAL_RTOL, credit=credit,
                      retry_reversed=lambda: student.spline_eval(x, rows[:, ::-1].copy(), t))
 

@@ -33,6 +33,8 @@ from autograder.checks import (
     FigureData,
     describe,
     expect_array,
+    expect_close,
+    expect_figure,
     is_figure,
     show_number,
     side_by_side,
@@ -134,11 +136,15 @@ def finish(reading: Reading, credit: Credit) -> None:
         CONVENTIONS.partial(credit, "layout", reading.convention)
 
 
-def _with_convention(message: str, reading: Reading) -> str:
+def _convention_note(reading: Reading) -> str:
     if reading.convention is None:
-        return message
-    return message + f" (Note: your array was read as rows [a, b, c, d] after reordering: " \
-                     f"{reading.convention}.)"
+        return ""
+    return f"(Note: your array was read as rows [a, b, c, d] after reordering: " \
+           f"{reading.convention}.)"
+
+
+def _with_convention(message: str, reading: Reading) -> str:
+    return f"{message} {_convention_note(reading)}".rstrip()
 
 
 # ---------------------------------------------------------------------------
@@ -239,16 +245,11 @@ def check_natural_ends(reading: Reading, x: np.ndarray, y: np.ndarray, rtol: flo
 
 def check_values(reading: Reading, expected: np.ndarray, rtol: float) -> None:
     """Each coefficient within ``rtol * (|expected| + largest |expected| in its column)``."""
-    got, want = reading.rows, np.asarray(expected, dtype=float)
-    bound = rtol * (np.abs(want) + np.max(np.abs(want), axis=0))
-    err = np.abs(got - want)
-    if np.any(err > bound):
-        i, k = (int(v) for v in np.unravel_index(np.argmax(err - bound), err.shape))
-        raise CheckFailure(_with_convention(
-            f"{NAME}: coefficient {'abcd'[k]} of piece {i} (row {i}, column {k}) should be "
-            f"{want[i, k]:.10g}; got {got[i, k]:.10g} (error {err[i, k]:.1e}, allowed "
-            f"{bound[i, k]:.1e}). {int((err > bound).sum())} of {err.size} coefficients are "
-            "outside the tolerance.", reading))
+    want = np.asarray(expected, dtype=float)
+    expect_close(reading.rows, want, rtol=rtol, atol=rtol * np.max(np.abs(want), axis=0),
+                 name=NAME, at=lambda i: f"coefficient {'abcd'[i[1]]} of piece {i[0]} "
+                                         f"(row {i[0]}, column {i[1]})",
+                 hint=_convention_note(reading))
 
 
 def grade_coefficients(got: object, x: np.ndarray, y: np.ndarray, expected: np.ndarray,
@@ -294,26 +295,23 @@ def grade_eval(got: object, x: np.ndarray, t: np.ndarray, expected: np.ndarray, 
     if arr.shape != want.shape:
         raise CheckFailure(f"{name} should return one value per entry of t, an array of shape "
                            f"{want.shape}; got {describe(got)}.")
-    arr = arr.astype(float)
-    scale = float(np.max(np.abs(want))) or 1.0
-    bound = rtol * (np.abs(want) + scale)
-    err = np.where(np.isfinite(arr), np.abs(arr - want), np.inf)
-    if not np.any(err > bound):
-        return
-    if retry_reversed is not None:
-        again = np.asarray(retry_reversed(), dtype=float)
-        if again.shape == want.shape and np.all(np.abs(again - want) <= bound):
-            CONVENTIONS.partial(credit, "eval-order",
-                                "Your spline_eval reads each row of coeffs as [d, c, b, a] "
-                                "(SciPy's order); the assignment's rows are [a, b, c, d], with "
-                                "S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + d (t - x_i)^3.")
-    k = int(np.argmax(err - bound))
-    raise CheckFailure(
-        f"{name} at t = {show_number(t.flat[k], DIGITS)}, {where_is(float(t.flat[k]), x)}, "
-        "should be "
-        f"{want.flat[k]:.10g}; got {arr.flat[k]:.10g}. {int((err > bound).sum())} of "
-        f"{err.size} values are off. Find the piece i with x[i] <= t < x[i+1] and evaluate "
-        "a + b u + c u^2 + d u^3 with u = t - x[i] (not t).")
+    atol = rtol * (float(np.max(np.abs(want))) or 1.0)
+    try:
+        expect_close(arr, want, rtol=rtol, atol=atol, name=name,
+                     at=lambda i: f"t = {show_number(t[i], DIGITS)}, {where_is(float(t[i]), x)}",
+                     hint="Find the piece i with x[i] <= t < x[i+1] and evaluate "
+                          "a + b u + c u^2 + d u^3 with u = t - x[i] (not t).")
+    except CheckFailure:
+        if retry_reversed is not None:
+            again = np.asarray(retry_reversed(), dtype=float)
+            if again.shape == want.shape and np.all(np.abs(again - want)
+                                                    <= atol + rtol * np.abs(want)):
+                CONVENTIONS.partial(credit, "eval-order",
+                                    "Your spline_eval reads each row of coeffs as [d, c, b, a] "
+                                    "(SciPy's order); the assignment's rows are [a, b, c, d], "
+                                    "with S_i(t) = a + b (t - x_i) + c (t - x_i)^2 + "
+                                    "d (t - x_i)^3.")
+        raise
 
 
 # ---------------------------------------------------------------------------
@@ -385,23 +383,6 @@ def _alternatives(strokes: Sequence[np.ndarray]) -> dict[str, Callable[[], np.nd
     }
 
 
-def _gap_message(dist: CurveDistance, what: str) -> str:
-    parts = []
-    if dist.forward_relative > DRAWING_PASS:
-        if dist.forward_at is None:
-            parts.append(f"the {what} is missing from your drawing: it has no curves")
-        else:
-            x, y = dist.forward_at
-            parts.append(f"parts of the {what} are missing from your drawing (the farthest "
-                         f"reference point is {dist.forward:.2g} units from any of your curves, "
-                         f"near ({x:.1f}, {y:.1f}))")
-    if dist.backward_relative > DRAWING_PASS and dist.backward_at is not None:
-        x, y = dist.backward_at
-        parts.append(f"your drawing has extra parts (e.g. near ({x:.1f}, {y:.1f}), "
-                     f"{dist.backward:.2g} units from the reference)")
-    return "; ".join(parts)
-
-
 def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, feedback: Feedback,
                   *, what: str = "car", name: str = "draw_car(strokes)",
                   picture_shown: bool = True) -> None:
@@ -417,17 +398,14 @@ def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, fe
     feedback.image(f"your {what} beside the reference", side_by_side(
         fig if is_figure(fig) else None, draw_reference(strokes),
         title=f"{name}: your drawing (left) and the reference (right)"))
-    if not is_figure(fig):
-        raise CheckFailure(f"{name} should return the matplotlib Figure it drew on "
-                           "(fig, ax = plt.subplots() ... return fig); got "
-                           f"{describe(fig)}.")
-    points = curve_points(fig)
+    figure = expect_figure(fig, name=name)
+    points = curve_points(figure)
     if len(points) == 0:
         raise CheckFailure(f"The figure returned by {name} has no curves on it. Draw each "
                            "stroke with ax.plot on the axes of the figure you return.")
     reference = sample_strokes(strokes)
     dist = relative_curve_distance(points, reference)
-    mistake = _known_mistake(fig, strokes, reference, dist.scale)
+    mistake = _known_mistake(figure, strokes, reference, dist.scale)
     if mistake:
         message = (f"Your {what} follows the wrong curve: {mistake}"
                    + (" Compare the two pictures attached." if picture_shown else ""))
@@ -435,7 +413,7 @@ def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, fe
             credit.partial(0.5, message)
         raise CheckFailure(message)
     if dist.worst <= DRAWING_PASS:
-        if not any(ax.get("aspect") == "equal" for ax in fig["axes"] if isinstance(ax, dict)):
+        if not any(ax.get("aspect") == "equal" for ax in figure["axes"] if isinstance(ax, dict)):
             CONVENTIONS.partial(credit, "aspect",
                                 f"Your {what} is right, but the axes do not have equal aspect, "
                                 "so circles look like ellipses: call ax.set_aspect('equal').")
@@ -443,7 +421,7 @@ def grade_drawing(fig: object, strokes: Sequence[np.ndarray], credit: Credit, fe
     far = f"{dist.worst:.1%} of" if dist.worst < 1.0 else f"{dist.worst:.3g} times"
     message = (f"Your drawing is {far} the {what}'s size (the diagonal of its "
                f"bounding box, {dist.scale:.3g} units) away from the reference; up to "
-               f"{DRAWING_PASS:.0%} is allowed: {_gap_message(dist, what)}."
+               f"{DRAWING_PASS:.0%} is allowed: {dist.gaps(what, DRAWING_PASS)}."
                + (" Compare the two pictures attached." if picture_shown else ""))
     hint = _diagnose(points, strokes, dist)
     if hint:

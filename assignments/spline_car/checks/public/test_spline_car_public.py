@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-
 import spline_feedback as judge  # checks/public/spline_feedback.py: on sys.path while checks run
+from autograder.checks import Credit, Feedback, Student, over_datasets
 
 CAR_NPZ = Path(__file__).resolve().parents[2] / "data" / "car.npz"
 
@@ -24,7 +24,7 @@ CAR_NPZ = Path(__file__).resolve().parents[2] / "data" / "car.npz"
 RTOL = 1e-9
 
 
-def _rows(*rows):
+def _rows(*rows: list[str]) -> np.ndarray:
     return np.array([[float(Fraction(v)) for v in row] for row in rows])
 
 
@@ -48,21 +48,20 @@ SMALL = {
 }
 
 
-def _load_car():
+def _load_car() -> list[np.ndarray]:
     with np.load(CAR_NPZ, allow_pickle=False) as data:
         return [data[key] for key in sorted(data.files)]
 
 
-@pytest.mark.points(1)
-@pytest.mark.parametrize("case", list(SMALL))
-def test_spline_coefficients_small(student, credit, case):
+@over_datasets(SMALL, "case", points=1)
+def test_spline_coefficients_small(student: Student, credit: Credit, case: str) -> None:
     x, y, expected = (np.array(v, dtype=float) for v in SMALL[case])
     got = student.spline_coefficients(x, y)
     judge.grade_coefficients(got, x, y, expected, credit, rtol=RTOL)
 
 
 @pytest.mark.points(1)
-def test_natural_ends_small(student, credit):
+def test_natural_ends_small(student: Student, credit: Credit) -> None:
     x, y, _ = (np.array(v, dtype=float) for v in SMALL["uneven-4"])
     reading = judge.read_coefficients(student.spline_coefficients(x, y), x, y)
     judge.check_natural_ends(reading, x, y, RTOL)
@@ -70,7 +69,7 @@ def test_natural_ends_small(student, credit):
 
 
 @pytest.mark.points(1)
-def test_spline_eval_small(student, credit):
+def test_spline_eval_small(student: Student, credit: Credit) -> None:
     x, y, rows = (np.array(v, dtype=float) for v in SMALL["worked-example"])
     t = np.array([0.0, 1.0, 2.0, 3.0, 0.5, 1.5, 2.25])
     # S_0(0.5) = 5/3 * 0.5 - 2/3 * 0.125, S_1(1.5) = 1/2 by symmetry, S_2(2.25) from row 2
@@ -81,7 +80,7 @@ def test_spline_eval_small(student, credit):
 
 
 @pytest.mark.points(3)
-def test_draw_car(student, credit, feedback):
+def test_draw_car(student: Student, credit: Credit, feedback: Feedback) -> None:
     strokes = _load_car()
     fig = student.draw_car(strokes)
     judge.grade_drawing(fig, strokes, credit, feedback)
