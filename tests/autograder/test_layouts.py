@@ -180,12 +180,16 @@ def _gradescope_install(workspace: Path, cache: Path) -> tuple[Path, dict[str, s
 def installs(repo: Path, workspace: Path, cache: Path) -> Iterator[Installs]:
     """Every layout's install, started when the first test of the module asks."""
     student = workspace / "student"
+    # A suite run from a venv: ``--system-site-packages`` would give the beside venv the
+    # *base* interpreter's packages, not this venv's, so it gets its own install.
+    in_venv = sys.prefix != sys.base_prefix
     chains: list[list[tuple[str, Callable[[], Any]]]] = [[
         ("inside", lambda: envs.make_venv(
             repo / ".venv", install=["-e", str(repo), "-e", str(repo / "reference")], cache=cache)),
         ("beside", lambda: envs.make_venv(
-            workspace / "venv-beside", stack=False, system_site=True, cache=cache,
-            install=["--no-deps", "-e", str(repo), "-e", str(repo / "reference")])),
+            workspace / "venv-beside", stack=in_venv, system_site=not in_venv, cache=cache,
+            install=[*([] if in_venv else ["--no-deps"]), "-e", str(repo),
+                     "-e", str(repo / "reference")])),
         ("student", lambda: envs.make_venv(student / "venv", install=[str(repo)], cache=cache)),
     ], [
         ("user", lambda: _ordinary_user_install(workspace, cache)),
