@@ -16,7 +16,7 @@ import nbformat
 import pytest
 
 from autograder.assignment import load_assignment
-from autograder.errors import AssignmentError
+from autograder.errors import AssignmentError, EngineError
 from autograder.grading import Grader
 from autograder.results import SubmissionResult
 
@@ -182,6 +182,40 @@ def test_a_broken_check_stops_grading_until_fixed(stateful: tuple[Path, Grader],
             grader.grade(right, id="alice")
         assert grader._checks is None
     finally:
+        restored(folder)
+    assert verdicts(grader.grade(right, id="alice")) == verdicts(good)
+
+
+SKIPS_AN_ITEM = """
+def pytest_runtest_protocol(item, nextitem):
+    if item.name == "test_double":
+        return True  # claims the item ran: no verdict is recorded for it
+"""
+
+
+@pytest.mark.parametrize("breaks, error", [
+    ("conftest", EngineError),
+    ("interrupt", KeyboardInterrupt),
+])
+def test_a_broken_run_is_an_error_and_the_next_gets_a_new_session(
+        stateful: tuple[Path, Grader], right: Path, breaks: str,
+        error: type[BaseException]) -> None:
+    """Fewer verdicts than items is an EngineError, Ctrl-C in a check a KeyboardInterrupt;
+    either way nothing is returned, and the next submission collects a new session."""
+    folder, grader = stateful
+    public = folder / "checks" / "public"
+    good = grader.grade(right, id="alice")
+    try:
+        if breaks == "conftest":
+            (public / "conftest.py").write_text(SKIPS_AN_ITEM)
+        else:
+            (public / "test_double.py").write_text(
+                CHECKS + "\n\ndef test_pressed_ctrl_c():\n    raise KeyboardInterrupt\n")
+        with pytest.raises(error):
+            grader.grade(right, id="alice")
+        assert grader._checks is None
+    finally:
+        (public / "conftest.py").unlink(missing_ok=True)
         restored(folder)
     assert verdicts(grader.grade(right, id="alice")) == verdicts(good)
 
