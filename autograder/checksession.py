@@ -88,6 +88,7 @@ class CheckSession:
         self.broken = False
         self.plugin = GradingPlugin(context)
         self._checks = rootdir / "checks"
+        self._tops = _tops(self._checks)
         self._helpers = str(rootdir / "checks" / "public")
         self._config: pytest.Config | None = None
         self._session: pytest.Session | None = None
@@ -102,7 +103,7 @@ class CheckSession:
             self.items: tuple[pytest.Item, ...] = tuple(self._session.items)
             # The modules stay out of sys.modules between runs (see _installed_modules).
             self._modules = {n: m for n, m in sys.modules.items()
-                             if _is_check_module(n, m, _tops(self._checks))}
+                             if _is_check_module(n, m, self._tops)}
             self._pristine = _Pristine(self._modules.values(), self.items)
         except BaseException:
             self.discard()
@@ -125,9 +126,13 @@ class CheckSession:
         # Internal to pytest (Config._do_configure): wrap_session's own step between
         # building the Config and starting the session; it calls pytest_configure.
         config._do_configure()
-        config.hook.pytest_sessionstart(session=session)
-        self._started = True
-        config.hook.pytest_collection(session=session)
+        try:
+            config.hook.pytest_sessionstart(session=session)
+            self._started = True
+            config.hook.pytest_collection(session=session)
+        except Exception as exc:  # pytest.main answered these with a status, not a verdict
+            raise EngineError(f"the checks could not be collected ({type(exc).__name__}: "
+                              f"{exc}); nothing was graded") from exc
         errors = self.plugin.collection_errors
         if not errors and not session.items:
             errors.append("no checks were collected")
@@ -250,9 +255,8 @@ class CheckSession:
             for name, module in self._modules.items():
                 if sys.modules.get(name) is module:
                     del sys.modules[name]
-            tops = _tops(self._checks)
             for name in set(sys.modules) - before:  # imported by a check during the run
-                if _is_check_module(name, sys.modules[name], tops):
+                if _is_check_module(name, sys.modules[name], self._tops):
                     del sys.modules[name]
 
 
