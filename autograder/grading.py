@@ -7,26 +7,23 @@ distributed one later) only has to call :meth:`Grader.grade` per file.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
 import importlib.util
 import os
 import stat
-import sys
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterator, Sequence
-
-import pytest
+from typing import Any, Sequence
 
 import autograder
 from autograder import staticscan
 from autograder.assignment import Assignment
-from autograder.errors import AssignmentError, EngineError, NotebookError, WorkerCrashed
+from autograder.checksession import CheckSession, forget_check_modules, run_pytest
+from autograder.errors import NotebookError, WorkerCrashed
 from autograder.notebook import Notebook, locked_sources, read_notebook, restore_locked
-from autograder.plugin import CheckContext, GradingPlugin
+from autograder.plugin import CheckContext
 from autograder.report import write_result
 from autograder.results import CellError, CheckResult, SubmissionResult
 from autograder.sandbox import IsolationPolicy
@@ -67,16 +64,18 @@ def policy_for(assignment: Assignment, options: GradingOptions) -> IsolationPoli
     return replace(options.policy, limits=limits)
 
 
-def submission_key(sha256: str, assignment: Assignment, options: GradingOptions) -> str:
+def submission_key(sha256: str, assignment: Assignment, options: GradingOptions,
+                   *, digest: str | None = None) -> str:
     """Identifies a grading: a result is reused only when this key is unchanged.
 
     It hashes the notebook's bytes, everything in the assignment folder that
     grading reads (``assignment.toml``, the instructor notebook, data, checks;
     not ``examples/``), the sources of the engine and of ``reference``, and the
-    options with the whole isolation policy.
+    options with the whole isolation policy. ``digest``: the assignment's
+    :func:`assignment_digest`, when the caller has it already.
     """
-    text = "|".join((sha256, assignment_digest(assignment), engine_digest(), ENGINE_VERSION,
-                     options.digest(), repr(assignment.limits)))
+    text = "|".join((sha256, digest or assignment_digest(assignment), engine_digest(),
+                     ENGINE_VERSION, options.digest(), repr(assignment.limits)))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -167,8 +166,11 @@ class Grader:
         self.options = options or GradingOptions()
         self.policy = policy_for(assignment, self.options)
         self._locked = locked_sources(assignment.notebook)
-        #: how many check items the first run collected; every later run must match
-        self._collected: int | None = None
+        #: the checks, collected once and run for every submission, and the
+        #: assignment digest they were collected at (a new session when it changes)
+        self._checks: CheckSession | None = None
+        self._checks_digest = ""
+        self._digest = ""  # the assignment digest of the submission being graded
         self._slot = WorkerSlot(slot=slot)
 
     def __enter__(self) -> "Grader":
@@ -178,7 +180,15 @@ class Grader:
         self.close()
 
     def close(self) -> None:
-        self._slot.shutdown()
+        try:
+            self._close_checks()
+        finally:
+            self._slot.shutdown()
+
+    def _close_checks(self) -> None:
+        checks, self._checks = self._checks, None
+        if checks is not None:
+            checks.close()
 
     @property
     def check_files(self) -> list[Path]:
@@ -194,7 +204,8 @@ class Grader:
         start = time.perf_counter()
         sub_id = id or Path(path).stem
         raw_sha = _file_sha256(path)
-        key = submission_key(raw_sha, self.assignment, self.options)
+        self._digest = assignment_digest(self.assignment)
+        key = submission_key(raw_sha, self.assignment, self.options, digest=self._digest)
         seed = submission_seed(self.assignment, sub_id)
         try:
             _require_regular_file(Path(path))
@@ -258,39 +269,35 @@ class Grader:
             call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
             hidden_root=self.assignment.root / "checks" / "hidden",
             attachments=(out_dir / "images") if out_dir is not None else None)
-        plugin = GradingPlugin(context)
-        # Every submission imports the checks afresh: no module global of a check (or of
-        # its helpers) carries one student's state into the next, an edited check is
-        # never run from an old copy, and a check file that failed to import fails again
-        # instead of silently dropping its checks.
-        forget_check_modules(self.assignment.root / "checks")
+        checks = self._check_session(context)
         try:
-            status = run_pytest(self.check_files, self.assignment.root, plugin)
-        finally:
-            forget_check_modules(self.assignment.root / "checks")
-        if not plugin.collection_errors and status == pytest.ExitCode.NO_TESTS_COLLECTED:
-            plugin.collection_errors.append("no checks were collected")
-        if plugin.collection_errors:  # pytest reports these as "interrupted" too
-            raise AssignmentError(
-                f"The checks of assignment {self.assignment.name!r} could not be collected; "
-                "fix them before grading:\n" + "\n".join(plugin.collection_errors))
-        if status == pytest.ExitCode.INTERRUPTED:
-            # Ctrl-C inside pytest is turned into an exit status: a partial run must
-            # never be stored as a graded result.
-            raise KeyboardInterrupt
-        expected = self._collected if self._collected is not None else plugin.collected
-        if status not in (pytest.ExitCode.OK, pytest.ExitCode.TESTS_FAILED) or \
-                len(plugin.results) != plugin.collected or plugin.collected != expected:
-            raise EngineError(
-                f"the check run ended early (pytest status {int(status)}, "
-                f"{len(plugin.results)} of {plugin.collected} checks recorded, {expected} "
-                "expected); nothing was stored, and the submission is graded again on the "
-                "next run")
-        self._collected = expected
-        if out_dir is not None and plugin.instructor_log:
+            run = checks.run(context)
+        except BaseException:
+            # A run that failed (an engine error, Ctrl-C) may have left fixtures set up or
+            # items half run: that session is dropped, the next submission collects anew.
+            self._checks = None
+            checks.discard()
+            raise
+        if out_dir is not None and run.instructor_log:
             out_dir.mkdir(parents=True, exist_ok=True)
-            (out_dir / "grader.log").write_text("\n\n".join(plugin.instructor_log))
-        return tuple(plugin.results)
+            (out_dir / "grader.log").write_text("\n\n".join(run.instructor_log))
+        return run.results
+
+    def _check_session(self, context: CheckContext) -> CheckSession:
+        """The pytest session of the checks: kept while the assignment folder is unchanged.
+
+        A check file, a helper or a data file edited since the session was collected
+        (the assignment digest, which keys every result, moved) closes it and
+        collects the checks from disk again.
+        """
+        digest = self._digest or assignment_digest(self.assignment)
+        if self._checks is not None and self._checks_digest != digest:
+            self._close_checks()
+        if self._checks is None:
+            self._checks = CheckSession(self.check_files, self.assignment.root,
+                                        name=self.assignment.name, context=context)
+            self._checks_digest = digest
+        return self._checks
 
     def _data_files(self) -> list[tuple[Path, str]]:
         root = self.assignment.root
@@ -307,31 +314,6 @@ class Grader:
         if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
             roots.add(package.parent)
         return sorted(roots)
-
-
-def forget_check_modules(*folders: Path) -> None:
-    """Drop every imported module of the checks in ``folders`` (and their helpers).
-
-    pytest's ``--import-mode=importlib`` names a check module by its place in the
-    assignment (``checks.hidden.test_hull_hidden``, with ``checks`` and
-    ``checks.hidden`` as file-less parents) and reuses a module of that name found
-    in ``sys.modules``; dropping them makes the next run import what is on disk.
-    """
-    tops = tuple({str(f) + os.sep for folder in folders for f in (folder, folder.resolve())})
-    for name, module in list(sys.modules.items()):
-        origin = getattr(module, "__file__", None)
-        if name == "checks" or name.startswith("checks.") or (
-                isinstance(origin, str) and (origin.startswith(tops)
-                                             or _real_path(origin).startswith(tops))):
-            del sys.modules[name]
-
-
-@functools.lru_cache(maxsize=8192)
-def _real_path(path: str) -> str:
-    """``os.path.realpath``, remembered: resolving the files of ~1,500 loaded modules
-    twice per submission cost 100-200 ms. A module's file does not move while this
-    process lives; a check file is matched by its own path first in any case."""
-    return os.path.realpath(path)
 
 
 @functools.lru_cache(maxsize=32)
@@ -358,66 +340,6 @@ def forbidden_module_paths(assignment: Assignment) -> tuple[Path, ...]:
     """
     rules = assignment.rules
     return _module_paths(tuple(n for n in rules.forbid if n not in rules.internal_use))
-
-
-def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> int:
-    """Run the check files in this (trusted) process with ``plugin``; no terminal output.
-
-    ``rootdir/checks/public`` is on ``sys.path`` for the run, so public and hidden
-    checks import the helper modules released beside the public checks by name.
-    """
-    helpers = rootdir / "checks" / "public"
-    args = [str(f) for f in files] + ["-o", f"pythonpath={helpers}"] + [
-        # --confcutdir: a conftest.py above the assignment is never imported into the grader.
-        "-c", os.devnull, "--rootdir", str(rootdir), "--confcutdir", str(rootdir),
-        "-p", "no:cacheprovider",
-        "-p", "no:terminal", "-p", "no:stepwise", "-p", "no:unraisableexception",
-        "-p", "no:threadexception", "-p", "no:pastebin", "-p", "no:junitxml", "-p", "no:doctest",
-        "--assert=plain", "--import-mode=importlib",
-        "-W", "ignore::pytest.PytestAssertRewriteWarning",
-    ]
-    # When the grader itself runs inside pytest (an instructor's test-suite), that
-    # session's assertion rewriter would rewrite the checks and put their source in
-    # failure messages; it is taken out of the import system for the inner run.
-    hooks = [h for h in sys.meta_path if type(h).__name__ == "AssertionRewritingHook"]
-    for hook in hooks:
-        sys.meta_path.remove(hook)
-    try:
-        with _checks_environment():
-            return int(pytest.main(args, plugins=[plugin]))
-    finally:
-        sys.meta_path[0:0] = hooks
-
-
-#: pytest's own environment variables, as the check run sees them: only the grading
-#: plugin (third-party plugins cost start-up time and could change how checks run),
-#: and none of the caller's options (a CI job's ``PYTEST_ADDOPTS=--junitxml=...``
-#: would otherwise be an unknown option of the inner run and fail every grading).
-_CHECKS_ENVIRONMENT: dict[str, str | None] = {
-    "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1",
-    "PYTEST_ADDOPTS": None,
-    "PYTEST_PLUGINS": None,
-    "PYTEST_DEBUG": None,
-}
-
-
-@contextlib.contextmanager
-def _checks_environment() -> Iterator[None]:
-    """Set :data:`_CHECKS_ENVIRONMENT` for one check run; the caller's values come back after."""
-    saved = {name: os.environ.get(name) for name in _CHECKS_ENVIRONMENT}
-
-    def put(values: dict[str, str | None]) -> None:
-        for name, value in values.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-
-    put(_CHECKS_ENVIRONMENT)
-    try:
-        yield
-    finally:
-        put(saved)
 
 
 #: how a note that asks for a person starts (the class summary lists such submissions)

@@ -1,7 +1,8 @@
 """The pytest plugin that turns an assignment's checks into verdicts on one submission.
 
-Registered explicitly by :mod:`autograder.grading` for each submission (never
-auto-loaded). It provides the fixtures ``student``, ``credit``, ``rng`` and
+Registered explicitly by :mod:`autograder.checksession` in the one pytest session
+a grader keeps (never auto-loaded); :meth:`GradingPlugin.begin` points it at each
+submission in turn. It provides the fixtures ``student``, ``credit``, ``rng`` and
 ``feedback``, the marker ``points``, and records one :class:`CheckResult` per
 collected item. Like pytest-timeout, it lives in one readable module.
 """
@@ -103,15 +104,23 @@ def item_points(item: pytest.Item) -> float:
 
 
 class GradingPlugin:
-    """Fixtures, marker and verdicts for one submission."""
+    """Fixtures, marker and verdicts for one submission at a time."""
 
     def __init__(self, context: CheckContext) -> None:
-        self.context = context
-        self.results: list[CheckResult] = []
         self.collection_errors: list[str] = []
-        self.instructor_log: list[str] = []
         #: items pytest collected; every one must end with a recorded verdict
         self.collected = 0
+        self.begin(context)
+
+    def begin(self, context: CheckContext) -> None:
+        """Grade ``context``'s submission next: forget every verdict of the previous one.
+
+        The plugin lives as long as the pytest session, which outlives submissions;
+        everything that belongs to one submission is made afresh here.
+        """
+        self.context = context
+        self.results: list[CheckResult] = []
+        self.instructor_log: list[str] = []
         self._log = CallLog()
         self._feedback: Feedback | None = None
         self._seen: set[str] = set()

@@ -10,8 +10,13 @@ warm worker and is not counted, and times each phase of every submission:
 * worker start/sandbox: from the request for a child until its "started" message
   (grader, the warm parent's ``fork`` and the child entering the sandbox);
 * notebook run: from "started" to "ready" (the child running the cells);
-* pytest session and collection: the inner ``pytest.main`` outside the check
-  items (configuration, plugins, importing and collecting the checks);
+* pytest session and collection: the check run outside the check items. The
+  grader keeps one pytest session (:class:`autograder.checksession.CheckSession`),
+  configured and collected in the warm-up submission, so this is what each run
+  adds around the items (module globals put back, the plugin pointed at the
+  submission, sys.path and sys.modules set and cleared); before that session, it
+  was a whole ``pytest.main`` per submission (configuration, plugins, importing
+  and collecting the checks);
 * checks: the check items, with the child's time answering their calls;
 * sweep: killing the child and sweeping the slot (:func:`autograder.session.kill_child`
   and :func:`~autograder.session.sweep_slot`), most of whose wall time is the
@@ -45,7 +50,7 @@ sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
 
 import pytest  # noqa: E402
 
-from autograder import grading, session, staticscan  # noqa: E402
+from autograder import checksession, grading, session, staticscan  # noqa: E402
 from autograder.assignment import load_assignment  # noqa: E402
 from autograder.cputime import process_cpu_seconds  # noqa: E402
 
@@ -202,12 +207,12 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
     session.kill_child = read_then_kill
     session.sweep_slot = timed(current, "sweep", sweep)
 
-    main = pytest.main
+    prepare = checksession._prepareconfig
 
-    def pytest_main(args: Any, plugins: Any = None) -> Any:
-        return main(args, plugins=[*(plugins or []), PytestTimer(current)])
-    grading.run_pytest = timed(current, "pytest", grading.run_pytest)
-    pytest.main = pytest_main  # type: ignore[assignment]
+    def prepareconfig(args: Any, plugins: Any = None) -> Any:
+        return prepare(args, plugins=[*(plugins or []), PytestTimer(current)])
+    checksession._prepareconfig = prepareconfig
+    grading.CheckSession.run = timed(current, "pytest", grading.CheckSession.run)
 
 
 def median_ms(values: list[float]) -> float:
@@ -270,6 +275,8 @@ def report(rows: list[tuple[Probe, bool, float, float]],
           "   (medians per submission; the CPU total and shares are from means)")
     print("  of which collection (inside the pytest session): "
           f"{median_ms([p.wall['collection'] for p, *_ in current]):.1f} ms wall")
+    print(f"grader process CPU per submission: {median_ms([c for *_, c in current]):.1f} ms "
+          "(median; every phase's grader column and the rest of Grader.grade)")
     if not compared:
         return
     old = [p for p, is_old, *_ in rows if is_old]
