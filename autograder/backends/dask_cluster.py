@@ -60,6 +60,8 @@ log = logging.getLogger("autograder.dask")
 RESOURCE = "grading"
 #: files a payload may not bring (the client writes these itself)
 _CLIENT_FILES = frozenset({RESULTS_NAME, "feedback.html"})
+#: seconds between two look-ups of the cluster's grading slots while results arrive
+SLOTS_REFRESH = 1.0
 
 #: Dask settings for the processes this module starts (``local:N``'s scheduler, nannies
 #: and workers; ``autograder worker``'s nannies and workers). Measured on 2 cores
@@ -340,9 +342,13 @@ class DaskBackend:
         queue = deque(jobs)
         running: dict[Any, Job] = {}
         last = time.monotonic()
+        capacity, checked = 1, float("-inf")
 
         def top_up() -> None:
-            capacity = max(1, grading_slots(client))
+            nonlocal capacity, checked
+            # Asking the scheduler costs a round trip; a worker that joins waits a second.
+            if time.monotonic() - checked >= SLOTS_REFRESH:
+                capacity, checked = max(1, grading_slots(client)), time.monotonic()
             while queue and len(running) < capacity:
                 job = queue.popleft()
                 running[client.submit(grade_task, plugin, job.path.read_bytes(), job.path.name, job.id,
@@ -365,9 +371,10 @@ class DaskBackend:
                 top_up()
                 continue
             last = time.monotonic()
-            for future in done:
-                finished(self._store(future, running.pop(future), assignment, options, out_dir))
-            top_up()
+            finished_jobs = [(future, running.pop(future)) for future in done]
+            top_up()  # the freed slots grade on while this client writes the results
+            for future, job in finished_jobs:
+                finished(self._store(future, job, assignment, options, out_dir))
 
     @staticmethod
     def _store(future: Any, job: Job, assignment: Assignment, options: GradingOptions,
