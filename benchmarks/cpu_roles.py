@@ -120,6 +120,8 @@ class RoleSampler:
             seen = self._seen.get(pid)
             if seen is None:
                 seen = self._seen[pid] = _Seen(_role(_cmdline(pid), parent_role))
+            elif seen.role == "other":  # first seen between fork and exec: the parent's command
+                seen.role = _role(_cmdline(pid), parent_role)
             seen.own, seen.reaped = max(seen.own, stat[1]), max(seen.reaped, stat[2])
             stack.extend((child, seen.role) for child in _children(pid))
 
