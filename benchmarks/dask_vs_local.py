@@ -1,6 +1,6 @@
 """Grade the same batch with the local pool (``--jobs 2``) and with Dask (``--dask local:2``).
 
-Usage: ``python benchmarks/dask_vs_local.py [--count 200] [--workers 2] [--public-only]``.
+Usage: ``python benchmarks/dask_vs_local.py [--count 200] [--workers 2] [--public-only] [--cpu]``.
 
 The batch is ``count`` copies of the hull assignment's sample submissions, each
 with a distinct comment cell so that no result is reused. Both runs grade the
@@ -19,6 +19,8 @@ import time
 from pathlib import Path
 
 import nbformat
+
+from cpu_roles import RoleSampler
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "assignments" / "hull" / "examples"
@@ -41,6 +43,7 @@ def run(label: str, folder: Path, out: Path, **backend: object) -> dict[str, flo
     from autograder.grading import GradingOptions
 
     first: list[float] = []
+    sampler = RoleSampler().start() if ARGS.cpu else None
     start = time.perf_counter()
     report = api.grade("hull", [folder], out=out, progress=False,
                        options=GradingOptions(public_only=ARGS.public_only),
@@ -51,6 +54,15 @@ def run(label: str, folder: Path, out: Path, **backend: object) -> dict[str, flo
                "first": (first[0] - start) if first else float("nan"), "failed": len(report.failed)}
     print(f"{label:<22} {seconds:8.1f} s  {figures['rate']:6.2f} submissions/s  "
           f"first result after {figures['first']:5.1f} s  errors {figures['failed']}", flush=True)
+    if sampler is not None:
+        threads = sampler.client_threads()
+        count = max(1, len(report.results))
+        for role, cpu in sorted(sampler.stop().items()):
+            figures[f"cpu {role}"] = cpu / count
+            print(f"    CPU {role:<20} {cpu:7.1f} s  {cpu / count:6.3f} s/submission", flush=True)
+        print(f"    processes seen: {sampler.processes}", flush=True)
+        for name, cpu in sorted(threads.items(), key=lambda kv: -kv[1])[:6]:
+            print(f"      client thread {name:<28} {cpu:6.1f} s", flush=True)
     return figures
 
 
@@ -75,5 +87,7 @@ if __name__ == "__main__":  # LocalCluster spawns worker processes that re-impor
     parser.add_argument("--count", type=int, default=200)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--public-only", action="store_true")
+    parser.add_argument("--cpu", action="store_true",
+                        help="also print CPU seconds per process role (see cpu_roles.py)")
     ARGS = parser.parse_args()
     main()
