@@ -97,9 +97,9 @@ def engine_fingerprint() -> str:
     return hashlib.sha256(f"{ENGINE_VERSION}|{fresh}".encode()).hexdigest()
 
 
-def private_directory(prefix: str = "autograder-bundle-") -> Path:
-    """A fresh 0700 directory under the system's temporary folder, for unpacked bundles."""
-    return Path(tempfile.mkdtemp(prefix=prefix))
+def private_directory(prefix: str = "autograder-bundle-", *, parent: Path | None = None) -> Path:
+    """A fresh 0700 directory under ``parent`` (default: the system's temporary folder)."""
+    return Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
 
 
 def remove_directory(path: Path) -> None:

@@ -161,7 +161,7 @@ class Grader:
     """Grades submissions of one assignment, one at a time, on one warm worker slot."""
 
     def __init__(self, assignment: Assignment, options: GradingOptions | None = None,
-                 *, slot: int = 0) -> None:
+                 *, slot: int = 0, scratch: Path | None = None) -> None:
         self.assignment = assignment
         self.options = options or GradingOptions()
         self.policy = policy_for(assignment, self.options)
@@ -171,7 +171,7 @@ class Grader:
         self._checks: CheckSession | None = None
         self._checks_digest = ""
         self._digest = ""  # the assignment digest of the submission being graded
-        self._slot = WorkerSlot(slot=slot)
+        self._slot = WorkerSlot(slot=slot, scratch=scratch)
 
     def __enter__(self) -> "Grader":
         return self

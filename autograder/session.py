@@ -191,12 +191,15 @@ def _cell_report(data: Any) -> CellReport:
 class WorkerSlot:
     """One warm parent process; forks a sandboxed child per submission."""
 
-    def __init__(self, *, slot: int = 0, python: str = sys.executable) -> None:
+    def __init__(self, *, slot: int = 0, python: str = sys.executable,
+                 scratch: Path | None = None) -> None:
         self.slot, self._lock = claim_slot(slot)
         self._python = python
         self._proc: subprocess.Popen[bytes] | None = None
         self._control: socket.socket | None = None
-        self._home = Path(tempfile.mkdtemp(prefix="autograder-slot-"))
+        # Under ``scratch`` when the caller has a folder that is cleaned up for it (a Dask
+        # worker's own directory, which Dask removes even after the worker was killed).
+        self._home = Path(tempfile.mkdtemp(prefix="autograder-slot-", dir=scratch))
 
     def _start(self) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)

@@ -117,12 +117,13 @@ class GradingSlots(WorkerPlugin):
         self.problem = ""
         self._grader: Grader | None = None
         self._home: Path | None = None
+        self._top: Path | None = None
         self._lock = threading.Lock()
         self._ready = threading.Event()
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
-        state.update(_grader=None, _home=None, _lock=None, _ready=None)
+        state.update(_grader=None, _home=None, _top=None, _lock=None, _ready=None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -132,7 +133,7 @@ class GradingSlots(WorkerPlugin):
 
     async def setup(self, worker: distributed.Worker) -> None:
         try:
-            await asyncio.to_thread(self._prepare)
+            await asyncio.to_thread(self._prepare, Path(worker.local_directory))
         except Exception as exc:  # this worker cannot grade: take it out of the grading pool
             self.problem = f"worker {worker.address} cannot grade: {exc}"
             log.error("%s", self.problem)
@@ -140,24 +141,31 @@ class GradingSlots(WorkerPlugin):
         finally:
             self._ready.set()  # a task that arrived during the set-up may go on
 
-    def _prepare(self) -> None:
+    def _prepare(self, scratch: Path) -> None:
         if engine_fingerprint() != self.fingerprint:
             raise EngineError("its autograder or reference package differs from the client's; "
                               "install the same version of numgrade on both")
         extra = sorted(set(sandbox_notes()) - set(self.client_notes))
         if extra:
             raise EngineError("its sandbox is weaker than the client's: " + " ".join(extra))
-        self._home = private_directory()
+        # Everything under the Dask worker's own directory: Dask deletes it when the worker
+        # closes, and also after a worker was killed (the next worker on this machine
+        # purges directories whose lock nobody holds), so a killed worker leaves nothing.
+        # ``grading`` (bundle, submissions, results) is hidden from the student as a whole;
+        # the slot's own home (the warm parent's folder) sits beside it, not inside.
+        self._top = private_directory(parent=scratch)
+        self._home = self._top / "grading"
+        self._home.mkdir(mode=0o700)
         assignment = self.bundle.unpack(self._home / "assignment")
-        self._grader = Grader(assignment, self.options)
+        self._grader = Grader(assignment, self.options, scratch=self._top)
 
     def teardown(self, worker: distributed.Worker) -> None:
         if self._grader is not None:
             self._grader.close()
             self._grader = None
-        if self._home is not None:
-            remove_directory(self._home)
-            self._home = None
+        if self._top is not None:
+            remove_directory(self._top)
+            self._top = self._home = None
 
     def grade(self, data: bytes, filename: str, sub_id: str) -> dict[str, Any]:
         """Grade one submission's bytes; return ``{"result": dict, "files": {path: bytes}}``."""

@@ -27,6 +27,25 @@ import time
 from pathlib import Path
 from typing import Any
 
+_PR_SET_PDEATHSIG = 1
+_PR_SET_CHILD_SUBREAPER = 36
+
+
+def _die_with_parent() -> None:
+    """Ask the kernel to SIGKILL this process when its parent goes away."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the socket EOF still ends us
+        pass
+
+
+if __name__ == "__main__":
+    # Before the heavy imports: they take seconds (matplotlib may build its font cache
+    # into the slot's folder), and a grader killed meanwhile must not leave us running
+    # and writing into a folder its cleanup is removing.
+    _die_with_parent()
+
 # Heavy imports happen here, once, before any fork.
 import numpy  # noqa: F401
 import scipy  # noqa: F401
@@ -42,19 +61,6 @@ import matplotlib.tri  # noqa: E402,F401
 
 from autograder import protocol, sandbox  # noqa: E402
 from autograder.worker import execute, figures, guard, serve  # noqa: E402
-
-_PR_SET_PDEATHSIG = 1
-_PR_SET_CHILD_SUBREAPER = 36
-
-
-def _die_with_parent() -> None:
-    """Ask the kernel to SIGKILL this process when its parent goes away."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):  # not Linux: the socket EOF still ends us
-        pass
-
 
 def _adopt_orphans() -> None:
     """Become the child subreaper: whatever a submission leaves behind stays below us.
@@ -213,7 +219,6 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m autograder.worker")
     parser.add_argument("--control-fd", type=int, required=True)
     args = parser.parse_args(argv)
-    _die_with_parent()
     _adopt_orphans()
     control = socket.socket(fileno=args.control_fd)
     shell = execute.make_shell()

@@ -138,7 +138,11 @@ def test_dead_workers_cost_no_result_and_reruns_send_only_what_is_missing(tmp_pa
     # Dask counts a worker's death against every task queued on it, not only the one
     # running: allow two deaths so that `sleepy` (killed once by design) survives one
     # more death shared with `doomed`, which dies three times and becomes an error.
-    with dask.config.set({"distributed.scheduler.allowed-failures": 2}):
+    # The workers' own directories in a folder of the test's: a killed worker's slot and
+    # bundle must go with it (Dask purges a dead worker's directory).
+    scratch = tmp_path / "scratch"
+    with dask.config.set({"distributed.scheduler.allowed-failures": 2,
+                          "temporary-directory": str(scratch)}):
         cluster = local_cluster(2)
     with cluster, distributed.Client(cluster) as client:
         client.register_plugin(dask_test_plugins.KillWhenGrading(marks, once=("sleepy",),
@@ -162,6 +166,12 @@ def test_dead_workers_cost_no_result_and_reruns_send_only_what_is_missing(tmp_pa
         rerun = api.grade("hull", [subs], out=out, dask=cluster.scheduler_address, options=OPTIONS,
                           progress=False, on_result=lambda r: seen.append(r.id))
         assert rerun.reused == 1 and sorted(seen) == ["doomed", "solution"]  # error results are retried
+    # A killed worker's directory (its bundle and slot inside) is purged by the next worker
+    # that starts on the machine, as here: Dask's own rule for directories nobody locks.
+    from distributed.diskutils import WorkSpace
+    WorkSpace(str(scratch / "dask-scratch-space")).new_work_dir(prefix="next-worker-").release()
+    assert [p.name for p in scratch.rglob("autograder-*")] == [], "a slot or bundle outlived its worker"
+    assert list(scratch.rglob("worker-*")) == []
     code = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", str(subs / "doomed.ipynb"),
                            "--out", str(tmp_path / "cli"), "--dask", "tcp://127.0.0.1:9", "--no-progress"],
                           capture_output=True, text=True)
