@@ -52,20 +52,6 @@ def pytest_args(files: Sequence[Path], rootdir: Path) -> list[str]:
     ]
 
 
-def run_pytest(files: Sequence[Path], rootdir: Path, plugin: GradingPlugin) -> int:
-    """Run the check files once in this (trusted) process with ``plugin``; no terminal output.
-
-    ``rootdir/checks/public`` is on ``sys.path`` for the run, so public and hidden
-    checks import the helper modules released beside the public checks by name.
-    A grader keeps a :class:`CheckSession` instead; this one-shot run is for tools
-    and tests that look at the plugin alone.
-    """
-    helpers = rootdir / "checks" / "public"
-    args = pytest_args(files, rootdir) + ["-o", f"pythonpath={helpers}"]
-    with _without_assertion_rewriting(), _checks_environment():
-        return int(pytest.main(args, plugins=[plugin]))
-
-
 @dataclass(frozen=True)
 class CheckRun:
     """What one submission's run of the checks recorded."""
@@ -402,4 +388,4 @@ def _checks_environment() -> Iterator[None]:
         put(saved)
 
 
-__all__ = ["CheckRun", "CheckSession", "forget_check_modules", "pytest_args", "run_pytest"]
+__all__ = ["CheckRun", "CheckSession", "forget_check_modules", "pytest_args"]

@@ -20,7 +20,7 @@ from typing import Any, Sequence
 import autograder
 from autograder import staticscan
 from autograder.assignment import Assignment
-from autograder.checksession import CheckSession, forget_check_modules, run_pytest
+from autograder.checksession import CheckSession, forget_check_modules
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.plugin import CheckContext
@@ -170,7 +170,6 @@ class Grader:
         #: assignment digest they were collected at (a new session when it changes)
         self._checks: CheckSession | None = None
         self._checks_digest = ""
-        self._digest = ""  # the assignment digest of the submission being graded
         self._slot = WorkerSlot(slot=slot, scratch=scratch)
 
     def __enter__(self) -> "Grader":
@@ -204,8 +203,8 @@ class Grader:
         start = time.perf_counter()
         sub_id = id or Path(path).stem
         raw_sha = _file_sha256(path)
-        self._digest = assignment_digest(self.assignment)
-        key = submission_key(raw_sha, self.assignment, self.options, digest=self._digest)
+        digest = assignment_digest(self.assignment)
+        key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
         seed = submission_seed(self.assignment, sub_id)
         try:
             _require_regular_file(Path(path))
@@ -215,21 +214,23 @@ class Grader:
         except NotebookError as exc:
             notebook, problem = None, str(exc)
         if notebook is not None:
-            result = self._grade_notebook(notebook, seed, out_dir)
+            result = self._grade_notebook(notebook, seed, out_dir, digest)
         else:
-            result = self._grade_unreadable(problem, seed, out_dir)
+            result = self._grade_unreadable(problem, seed, out_dir, digest)
         result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
                          execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
         if out_dir is not None:
             write_result(out_dir, result)
         return result
 
-    def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None) -> SubmissionResult:
+    def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None,
+                          digest: str) -> SubmissionResult:
         message = f"This file could not be graded: {problem}"
-        tests = self._run_checks(_Unreadable(message), (), {}, seed, out_dir)
+        tests = self._run_checks(_Unreadable(message), (), {}, seed, out_dir, digest)
         return _result(self.assignment.name, "ungradable", message, tests, seed)
 
-    def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None) -> SubmissionResult:
+    def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None,
+                        digest: str) -> SubmissionResult:
         cells = [(c.index, c.source) for c in notebook.cells]
         sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
         report = staticscan.scan(sources, self.assignment.rules.forbid) \
@@ -250,7 +251,7 @@ class Grader:
             forbid=self.assignment.rules.to_wire())
         try:
             run = session.start()
-            tests = self._run_checks(session, run.functions, forbidden, seed, out_dir)
+            tests = self._run_checks(session, run.functions, forbidden, seed, out_dir, digest)
         finally:
             session.close()
         outcome = ("timeout" if run.timed_out_cells else
@@ -263,13 +264,13 @@ class Grader:
                                          for c in run.cells if not c.ok))
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
-                    seed: int, out_dir: Path | None) -> tuple[CheckResult, ...]:
+                    seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:
         context = CheckContext(
             target=target, functions=tuple(functions), forbidden=forbidden,
             call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
             hidden_root=self.assignment.root / "checks" / "hidden",
             attachments=(out_dir / "images") if out_dir is not None else None)
-        checks = self._check_session(context)
+        checks = self._check_session(context, digest)
         try:
             run = checks.run(context)
         except BaseException:
@@ -283,14 +284,13 @@ class Grader:
             (out_dir / "grader.log").write_text("\n\n".join(run.instructor_log))
         return run.results
 
-    def _check_session(self, context: CheckContext) -> CheckSession:
+    def _check_session(self, context: CheckContext, digest: str) -> CheckSession:
         """The pytest session of the checks: kept while the assignment folder is unchanged.
 
         A check file, a helper or a data file edited since the session was collected
-        (the assignment digest, which keys every result, moved) closes it and
-        collects the checks from disk again.
+        (``digest``, the assignment digest that keys every result, moved) closes it
+        and collects the checks from disk again.
         """
-        digest = self._digest or assignment_digest(self.assignment)
         if self._checks is not None and self._checks_digest != digest:
             self._close_checks()
         if self._checks is None:
@@ -446,5 +446,5 @@ def _file_sha256(path: Path) -> str:
 
 __all__ = ["ENGINE_VERSION", "REVIEW_PREFIX", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
            "forget_check_modules",
-           "forbidden_functions", "review_notes", "run_pytest", "submission_key", "submission_seed",
+           "forbidden_functions", "review_notes", "submission_key", "submission_seed",
            "summarise_run"]

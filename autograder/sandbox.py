@@ -61,6 +61,9 @@ from autograder.errors import UsageError
 try:  # Landlock is Linux-only; elsewhere the sandbox notes its absence.
     import landlockpy
     from landlockpy import AccessFS, AccessNet, RestrictFlag, Ruleset, Scope
+
+    #: what the child may do in a readable root (everything else is about changing files)
+    _READ_RIGHTS = AccessFS.READ_FILE | AccessFS.READ_DIR | AccessFS.EXECUTE
 except ImportError:  # pragma: no cover - landlockpy is a Linux dependency
     landlockpy = None  # type: ignore[assignment]
 
@@ -68,11 +71,13 @@ __all__ = [
     "IsolationPolicy",
     "IsolationSupport",
     "Limits",
+    "SharedLandlock",
     "clean_environment",
     "coverable_folders",
     "enter_sandbox",
     "probe_support",
     "readable_paths",
+    "shared_landlock",
 ]
 
 GIB = 1 << 30
@@ -572,6 +577,7 @@ def enter_sandbox(
     *,
     slot: int,
     exclude: Sequence[Path] = (),
+    shared: SharedLandlock | None = None,
 ) -> tuple[str, ...]:
     """Confine the calling process; call it in the forked child, before student code.
 
@@ -585,6 +591,11 @@ def enter_sandbox(
         Index of the worker slot; the child runs as ``policy.base_uid + slot``.
     exclude : sequence of Path
         Trees the child must not read (repository root, assignment folder).
+    shared : SharedLandlock, optional
+        The Landlock ruleset the warm parent built once (see :func:`shared_landlock`),
+        used when ``workdir`` lies directly in its work root; the child then adds a
+        small layer of its own that confines writes to ``workdir``. Without it the
+        child builds the whole ruleset itself.
 
     Returns
     -------
@@ -610,7 +621,12 @@ def enter_sandbox(
     private_ipc = _apply_namespaces(policy, workdir, exclude, notes)
     notes.append(_replace_environment(clean_environment(workdir)))
     os.chdir(workdir)
-    ruleset = _prepare_landlock(policy, workdir, exclude, notes)
+    if shared is not None and shared.serves(policy, workdir, exclude):
+        notes.extend(shared.notes)
+        ruleset = shared.ruleset
+        writes = None if ruleset is None else _write_layer(workdir, notes)
+    else:
+        ruleset, writes = _prepare_landlock(policy, workdir, exclude, notes), None
     notes.append(_apply_limits(policy.limits, _process_allowance(policy)))
     _join_cgroup(policy, slot, notes)
     _apply_identity(policy, workdir, policy.base_uid + slot, notes)
@@ -620,6 +636,9 @@ def enter_sandbox(
         notes.append("seccomp off by policy")
     if ruleset is not None:
         _attempt(notes, "landlock", lambda: _restrict(ruleset))
+    if writes is not None:
+        _attempt(notes, "landlock write layer",
+                 lambda: _restrict(writes, "landlock write layer"))
     return tuple(notes)
 
 
@@ -894,9 +913,76 @@ def _prepare_landlock(
         return None
 
 
+@dataclass(frozen=True)
+class SharedLandlock:
+    """The Landlock ruleset a warm parent builds once and every child it forks enforces.
+
+    Building the whole ruleset costs a child several milliseconds (one rule per
+    readable root, hundreds of them); built once before any fork, each child only
+    enforces the inherited descriptor. Its only writable folder is the slot's *work
+    root*, the parent of every submission's working directory; a second, small layer
+    that each child adds (:func:`_write_layer`) narrows writing to its own working
+    directory, as Landlock layers intersect. The grader puts nothing else in the work
+    root while a child runs.
+    """
+
+    ruleset: Ruleset | None
+    work_root: Path
+    notes: tuple[str, ...]
+    #: the policy's file and folder settings and the exclusions it was built for
+    key: tuple[object, ...]
+
+    def serves(self, policy: IsolationPolicy, workdir: Path, exclude: Sequence[Path]) -> bool:
+        """Whether this ruleset is the one ``policy`` asks for a child in ``workdir``."""
+        return (_resolve(workdir).parent == self.work_root
+                and self.key == _landlock_key(policy, self.work_root, exclude))
+
+    def close(self) -> None:
+        if self.ruleset is not None:
+            self.ruleset.close()
+
+
+def shared_landlock(policy: IsolationPolicy, work_root: Path,
+                    exclude: Sequence[Path]) -> SharedLandlock:
+    """Build the ruleset for every child whose working directory is in ``work_root``.
+
+    Call it in the warm parent, before forking; the ruleset's descriptor is inherited
+    and closed by each child as it enforces it.
+    """
+    work_root = _resolve(work_root)
+    notes: list[str] = []
+    ruleset = _prepare_landlock(policy, work_root, exclude, notes)
+    return SharedLandlock(ruleset, work_root, tuple(notes),
+                          _landlock_key(policy, work_root, exclude))
+
+
+def _landlock_key(policy: IsolationPolicy, work_root: Path,
+                  exclude: Sequence[Path]) -> tuple[object, ...]:
+    return (policy.landlock, tuple(policy.allowed_read), str(work_root),
+            tuple(sorted(str(_resolve(p)) for p in exclude)))
+
+
+def _write_layer(workdir: Path, notes: list[str]) -> Ruleset | None:
+    """A ruleset that handles only the rights to change files and allows them in
+    ``workdir`` and the writable devices; enforced on top of the shared ruleset."""
+    handled = landlockpy.fs_for_abi(_landlock_abi()) & ~_READ_RIGHTS
+    try:
+        ruleset = Ruleset(handled_fs=handled, handled_net=AccessNet(0))
+        rules = [(workdir, _workdir_access())] + [
+            (path, access) for path, access in _device_rules() if access & ~_READ_RIGHTS]
+        failed = [str(path) for path, access in rules
+                  if not _allow(ruleset, path, access & handled)]
+    except OSError as exc:
+        notes.append(f"landlock write layer skipped: {exc.strerror or exc}")
+        return None
+    if failed:
+        notes.append(f"landlock write layer: {len(failed)} paths could not be allowed, "
+                     f"e.g. {failed[0]}")
+    return ruleset
+
+
 def _build_ruleset(abi: int, workdir: Path, roots: Sequence[Path], notes: list[str]) -> Ruleset:
-    read_only = AccessFS.READ_FILE | AccessFS.READ_DIR | AccessFS.EXECUTE
-    rules = [(root, read_only) for root in roots] + list(_device_rules()) + [
+    rules = [(root, _READ_RIGHTS) for root in roots] + list(_device_rules()) + [
         (workdir, _workdir_access())
     ]
     ruleset = Ruleset(
@@ -936,9 +1022,9 @@ def _allow(ruleset: Ruleset, path: Path, access: AccessFS) -> bool:
     return True
 
 
-def _restrict(ruleset: Ruleset) -> str:
+def _restrict(ruleset: Ruleset, label: str = "landlock") -> str:
     # TSYNC (ABI 8) also restricts other threads; dropped on older kernels.
     with ruleset:
         ruleset.restrict(RestrictFlag.TSYNC)
-        return (f"landlock: ABI {ruleset.abi_version}, fs {int(ruleset.handled_fs):#x}, "
+        return (f"{label}: ABI {ruleset.abi_version}, fs {int(ruleset.handled_fs):#x}, "
                 f"net {int(ruleset.handled_net):#x}, scoped {int(ruleset.scoped):#x}")

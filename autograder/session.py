@@ -46,6 +46,7 @@ from autograder.errors import (
     WorkerCrashed,
 )
 from autograder.sandbox import IsolationPolicy, probe_support
+from autograder.tempdirs import OwnedFolder
 
 #: how long the warm parent may take to import numpy, scipy and matplotlib (our own
 #: process, not student code: generous, so a loaded machine is slow but never wrong)
@@ -199,7 +200,15 @@ class WorkerSlot:
         self._control: socket.socket | None = None
         # Under ``scratch`` when the caller has a folder that is cleaned up for it (a Dask
         # worker's own directory, which Dask removes even after the worker was killed).
-        self._home = Path(tempfile.mkdtemp(prefix="autograder-slot-", dir=scratch))
+        # Locked while this slot lives: the next slot removes it if this grader is killed.
+        self._folder = OwnedFolder(prefix="autograder-slot-", parent=scratch)
+        self._home = self._folder.path
+        #: every submission's working directory is made in here (see StudentSession);
+        #: traversable (711) for the slot's sandbox user, readable by nobody else
+        self.work_root = self._home / "work"
+        self.work_root.mkdir(mode=0o711)
+        os.chmod(self.work_root, 0o711)  # mkdir's mode is masked by the umask
+        os.chmod(self._home, 0o711)
 
     def _start(self) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -276,7 +285,7 @@ class WorkerSlot:
 
     def shutdown(self) -> None:
         self.close()
-        shutil.rmtree(self._home, ignore_errors=True)
+        self._folder.remove()
         if self._lock >= 0:
             os.close(self._lock)
             self._lock = -1
@@ -778,7 +787,7 @@ class StudentSession:
 
     def _spawn(self) -> None:
         self._kill()
-        self._workdir = Path(tempfile.mkdtemp(prefix="submission-"))
+        self._workdir = Path(tempfile.mkdtemp(prefix="submission-", dir=self.slot.work_root))
         for source, relative in self.data_files:
             target = self._workdir / relative
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -791,6 +800,11 @@ class StudentSession:
             # protocol's item limit (the worker parses it with json.loads).
             "cells_json": json.dumps([[i, s] for i, s in self.cells if i not in self.skip]),
         }
+        if os.listdir(self.slot.work_root) == [self._workdir.name]:
+            # The warm parent's one ruleset may then serve this child: it lets the child
+            # change files anywhere in the work root, which holds nothing but its own
+            # folder (a leftover that could not be removed makes the child build its own).
+            request["workroot"] = str(self.slot.work_root)
         self._pid, self._sock = self.slot.spawn(request)
         self._pidfd = child_pidfd(self._pid, self.slot.warm_parent)
         self._clock = CpuClock(self._pid)

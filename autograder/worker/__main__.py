@@ -93,7 +93,8 @@ def _policy(spec: dict[str, Any]) -> sandbox.IsolationPolicy:
     return sandbox.IsolationPolicy(limits=limits, **rest)
 
 
-def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingShell) -> None:
+def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingShell,
+           shared: sandbox.SharedLandlock | None) -> None:
     """Enter the sandbox, run the cells, then serve calls. Never returns."""
     code = 0
     try:
@@ -102,7 +103,10 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         workdir = Path(request["workdir"])
         _quiet_standard_streams()
         notes = sandbox.enter_sandbox(policy, workdir, slot=int(request["slot"]),
-                                      exclude=[Path(p) for p in request.get("exclude", [])])
+                                      exclude=[Path(p) for p in request.get("exclude", [])],
+                                      shared=shared)
+        if shared is not None:  # enforced (and closed) above unless another was needed
+            shared.close()
         _die_with_parent()
         gap = _unreadable_path()
         if gap is not None:
@@ -130,6 +134,26 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
 
 #: the forbid list the warm parent applied to itself (inherited by every child)
 _APPLIED: list[str | None] = [None]
+#: the Landlock ruleset built once for every child (rebuilt if the settings change)
+_SHARED: list[sandbox.SharedLandlock | None] = [None]
+
+
+def _shared_landlock(request: dict[str, Any]) -> sandbox.SharedLandlock | None:
+    """The ruleset for this request's child, built here once for the slot's work root.
+
+    None when the grader named no work root (the child then builds its own).
+    """
+    root = request.get("workroot")
+    if not isinstance(root, str):
+        return None
+    policy, workdir = _policy(request["policy"]), Path(request["workdir"])
+    exclude = [Path(p) for p in request.get("exclude", [])]
+    current = _SHARED[0]
+    if current is None or not current.serves(policy, workdir, exclude):
+        if current is not None:
+            current.close()
+        current = _SHARED[0] = sandbox.shared_landlock(policy, Path(root), exclude)
+    return current if current.serves(policy, workdir, exclude) else None
 
 
 def _forbid_key(request: dict[str, Any]) -> str:
@@ -206,10 +230,11 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     # are found from the readable paths, which this fills the cache with too.
     sandbox.coverable_folders([Path(p) for p in request.get("exclude", [])],
                               Path(request["workdir"]), _policy(request["policy"]))
+    shared = _shared_landlock(request)
     pid = os.fork()
     if pid == 0:
         control.close()
-        _child(sub, request, shell)
+        _child(sub, request, shell, shared)
     sub.close()
     protocol.send_message(control, {"pid": pid})
     return True

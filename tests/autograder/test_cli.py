@@ -13,15 +13,18 @@ from pathlib import Path
 
 import pytest
 
+from autograder.tempdirs import GRACE_SECONDS, LOCK_NAME
+
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "assignments" / "hull" / "examples"
 
 pytestmark = pytest.mark.slow
 
 
-def autograder(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+def autograder(*args: str, cwd: Path | None = None, timeout: float = 300,
+               env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "autograder", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=cwd)
+                          text=True, timeout=timeout, cwd=cwd, env=env)
 
 
 @pytest.fixture(scope="module")
@@ -70,10 +73,13 @@ def test_killed_batch_resumes_and_loses_nothing(tmp_path: Path) -> None:
     for k in range(12):
         shutil.copy(EXAMPLES / "wrong-clockwise.ipynb", submissions / f"student{k:02d}.ipynb")
     out = tmp_path / "out"
+    scratch = tmp_path / "tmp"  # the runs' temporary folder, watched for leftovers
+    scratch.mkdir()
+    env = {**os.environ, "TMPDIR": str(scratch)}
     proc = subprocess.Popen([sys.executable, "-m", "autograder", "grade", "hull", str(submissions),
                              "--out", str(out), "--jobs", "1", "--no-progress"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
+                            start_new_session=True, env=env)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and len(list(out.glob("*/results.json"))) < 2:
         time.sleep(0.05)
@@ -83,9 +89,18 @@ def test_killed_batch_resumes_and_loses_nothing(tmp_path: Path) -> None:
     assert 2 <= len(first) < 12
     for path in out.glob("*/results.json"):
         json.loads(path.read_text())  # every file present is whole
+    # A killed grader cleans nothing up: its slot folder (with the working directory
+    # of the submission it was grading) stays, until the next grader finds it unlocked.
+    killed = sorted(scratch.glob("autograder-slot-*"))
+    assert killed, "the killed run left no slot folder: this test no longer tests its clean-up"
+    past_grace = time.time() - 2 * GRACE_SECONDS  # as if the kill were long ago
+    for folder in killed:
+        os.utime(folder / LOCK_NAME, (past_grace, past_grace))
     again = autograder("grade", "hull", str(submissions), "--out", str(out), "--jobs", "2",
-                       "--no-progress")
+                       "--no-progress", env=env)
     assert again.returncode == 0, again.stderr
     assert f"reused {len(first)}" in again.stdout
     rows = (out / "grades.csv").read_text().splitlines()
     assert len(rows) == 13
+    assert [p for p in killed if p.exists()] == []
+    assert sorted(p.name for p in scratch.iterdir() if p.name.startswith("autograder-slot-")) == []

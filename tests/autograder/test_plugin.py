@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
+from autograder.checksession import CheckSession
 from autograder.errors import CallTimeout, StudentException
-from autograder.plugin import CheckContext, GradingPlugin
-from autograder.grading import run_pytest
+from autograder.plugin import CheckContext
 
 CHECKS = '''
 import pytest
@@ -77,13 +77,16 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     hidden = tmp_path / "checks" / "hidden"
     hidden.mkdir(parents=True)
     (hidden / "test_demo.py").write_text(CHECKS)
-    plugin = GradingPlugin(CheckContext(
+    context = CheckContext(
         target=FakeTarget(), functions=("double", "boom", "slow", "cheat"),
         forbidden={"cheat": "`cheat` uses scipy.spatial, which is not allowed."},
-        call_timeout=1.0, seed=42, hidden_root=hidden))
-    run_pytest([hidden / "test_demo.py"], tmp_path, plugin)
-    assert not plugin.collection_errors
-    return {r.name: r for r in plugin.results}
+        call_timeout=1.0, seed=42, hidden_root=hidden)
+    session = CheckSession([hidden / "test_demo.py"], tmp_path, name="demo", context=context)
+    try:
+        run = session.run(context)
+    finally:
+        session.close()
+    return {r.name: r for r in run.results}
 
 
 def test_passing_check_gets_its_points(results: dict[str, Any]) -> None:

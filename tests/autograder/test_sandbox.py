@@ -30,9 +30,11 @@ from autograder.sandbox import (
     Limits,
     clean_environment,
     coverable_folders,
+    SharedLandlock,
     enter_sandbox,
     probe_support,
     readable_paths,
+    shared_landlock,
 )
 from autograder.session import claim_slot
 
@@ -86,19 +88,31 @@ def run_sandboxed(
     slot: int = 0,
     exclude: Sequence[Path] = (),
     deadline: float = CHILD_DEADLINE,
+    shared: bool = False,
+    ruleset: SharedLandlock | None = None,
 ) -> Outcome:
-    """Fork, enter the sandbox in the child, run ``action`` there, collect the report."""
+    """Fork, enter the sandbox in the child, run ``action`` there, collect the report.
+
+    ``shared``: as the warm parent does, build the Landlock ruleset here, before the
+    fork, for every working directory in ``workdir``'s parent folder (or pass one
+    built already as ``ruleset``).
+    """
+    if shared:  # what the grader guarantees: the work root holds only this child's folder
+        assert os.listdir(workdir.parent) == [workdir.name], "a work root holds one folder"
+        ruleset = shared_landlock(policy, workdir.parent, exclude)
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child never returns into pytest
         os.close(read_fd)
-        _child_main(action, write_fd, policy, workdir, SLOTS[slot], exclude)
+        _child_main(action, write_fd, policy, workdir, SLOTS[slot], exclude, ruleset)
     os.close(write_fd)
     try:
         data, status, timed_out = _collect(pid, read_fd, deadline)
     finally:
         os.close(read_fd)
         _kill_group(pid)
+        if ruleset is not None:
+            ruleset.close()
     return Outcome(json.loads(data) if data else None, status, timed_out)
 
 
@@ -109,11 +123,12 @@ def _child_main(
     workdir: Path,
     slot: int,
     exclude: Sequence[Path],
+    shared: SharedLandlock | None,
 ) -> None:
     code = 70
     try:
         try:
-            notes = enter_sandbox(policy, workdir, slot=slot, exclude=exclude)
+            notes = enter_sandbox(policy, workdir, slot=slot, exclude=exclude, shared=shared)
         except BaseException as exc:
             report: dict[str, Any] = {"sandbox_error": repr(exc)}
         else:
@@ -189,8 +204,9 @@ def require_policy(policy: IsolationPolicy) -> None:
 
 @pytest.fixture
 def workdir(tmp_path: Path) -> Path:
-    path = tmp_path / "work"
-    path.mkdir()
+    """A working directory alone in its folder, as a slot's work root holds it."""
+    path = tmp_path / "work-root" / "work"
+    path.mkdir(parents=True)
     return path
 
 
@@ -269,18 +285,62 @@ def test_probe_support_is_cached_and_consistent() -> None:
 # ----------------------------------------------------------------------- files
 
 
-def test_write_outside_workdir_fails(tmp_path: Path, workdir: Path) -> None:
+@pytest.mark.parametrize("shared", [False, True], ids=["own-ruleset", "shared-ruleset"])
+def test_write_outside_workdir_fails(tmp_path: Path, workdir: Path, shared: bool) -> None:
     require_landlock(1, "confining writes")
     open_dir = tmp_path / "world-writable"  # only Landlock stands in the way here
     open_dir.mkdir(mode=0o777)
     open_dir.chmod(0o777)
     target = open_dir / "escaped.txt"
-    outcome = run_sandboxed(lambda: target.write_text("x"), workdir)
+    outcome = run_sandboxed(lambda: target.write_text("x"), workdir, shared=shared)
     assert outcome.error["error"] == "PermissionError"
     assert not target.exists()
 
 
-def test_write_inside_workdir_works(workdir: Path) -> None:
+def test_shared_ruleset_lets_a_child_change_nothing_beside_its_workdir(tmp_path: Path) -> None:
+    """The warm parent's ruleset allows the whole work root; each child's own layer
+    narrows writing to its working directory, as the fallback of one ruleset does."""
+    require_landlock(1, "confining writes")
+    root = tmp_path / "work-root"
+    root.mkdir(mode=0o777)
+    root.chmod(0o777)
+    mine, left = root / "submission-a", root / "left-behind"
+    mine.mkdir()
+    ruleset = shared_landlock(DEFAULT, root, [])  # built while the root holds one folder
+    left.mkdir(mode=0o777)  # a folder the grader would have removed, here on purpose
+    left.chmod(0o777)
+    (left / "old.txt").write_text("kept")
+
+    def action() -> dict[str, str]:
+        return {
+            "beside": _try(lambda: (root / "planted.txt").write_text("x")),
+            "sibling": _try(lambda: (left / "new.txt").write_text("x")),
+            "remove": _try(lambda: (left / "old.txt").unlink()),
+            "own": _try(lambda: Path("mine.txt").write_text("x")),
+        }
+
+    outcome = run_sandboxed(action, mine, slot=2, ruleset=ruleset)
+    assert outcome.value["beside"] == outcome.value["sibling"] == "PermissionError"
+    assert outcome.value["remove"] == "PermissionError"
+    assert outcome.value["own"] != "PermissionError"
+    assert not (root / "planted.txt").exists() and not (left / "new.txt").exists()
+    assert (left / "old.txt").read_text() == "kept"
+    assert any(note.startswith("landlock: ABI") for note in outcome.report["notes"])
+
+
+def test_shared_ruleset_for_another_work_root_is_not_used(tmp_path: Path, workdir: Path) -> None:
+    """A child whose working directory is not in the ruleset's work root builds its own."""
+    require_landlock(1, "confining writes")
+    ruleset = shared_landlock(DEFAULT, tmp_path / "elsewhere", [])
+    assert not ruleset.serves(DEFAULT, workdir, [])
+    assert not ruleset.serves(IsolationPolicy(allowed_read=(str(tmp_path),)),
+                              tmp_path / "elsewhere" / "x", [])
+    assert ruleset.serves(DEFAULT, tmp_path / "elsewhere" / "x", [])
+    ruleset.close()
+
+
+@pytest.mark.parametrize("shared", [False, True], ids=["own-ruleset", "shared-ruleset"])
+def test_write_inside_workdir_works(workdir: Path, shared: bool) -> None:
     def action() -> list[str]:
         import tempfile
 
@@ -291,37 +351,42 @@ def test_write_inside_workdir_works(workdir: Path) -> None:
             handle.write(b"scratch")
         return sorted(os.listdir(".")) + [Path("b.txt").read_text()]
 
-    outcome = run_sandboxed(action, workdir, slot=1)
+    outcome = run_sandboxed(action, workdir, slot=1, shared=shared)
     # The child's files live on its own tmpfs (the disk quota): checked from inside.
     assert "b.txt" in outcome.value
     assert outcome.value[-1] == "answer"
     assert any(note.startswith("landlock: ABI") for note in outcome.report["notes"]) or (
         probe_support().landlock_abi == 0
     )
+    layers = [n for n in outcome.report["notes"] if n.startswith("landlock write layer: ABI")]
+    assert len(layers) == (1 if shared and probe_support().landlock_abi > 0 else 0)
 
 
-def test_excluded_tree_inside_an_allowed_root_is_unreadable(tmp_path: Path, workdir: Path) -> None:
+@pytest.mark.parametrize("shared", [False, True], ids=["own-ruleset", "shared-ruleset"])
+def test_excluded_tree_inside_an_allowed_root_is_unreadable(tmp_path: Path, workdir: Path,
+                                                           shared: bool) -> None:
     require_landlock(1, "confining reads")
-    shared = tmp_path / "shared"
-    repo = shared / "repo"
+    allowed = tmp_path / "allowed"
+    repo = allowed / "repo"
     (repo / "checks").mkdir(parents=True)
     (repo / "checks" / "hidden.py").write_text("SECRET = 1\n")
-    (shared / "data.txt").write_text("public\n")
-    policy = IsolationPolicy(allowed_read=(str(shared),))
+    (allowed / "data.txt").write_text("public\n")
+    policy = IsolationPolicy(allowed_read=(str(allowed),))
 
     def action() -> dict[str, str]:
         return {
-            "public": (shared / "data.txt").read_text(),
+            "public": (allowed / "data.txt").read_text(),
             "hidden": _try(lambda: (repo / "checks" / "hidden.py").read_text()),
             "listing": _try(lambda: os.listdir(repo)),
         }
 
-    value = run_sandboxed(action, workdir, policy=policy, exclude=[repo]).value
+    value = run_sandboxed(action, workdir, policy=policy, exclude=[repo], shared=shared).value
     assert value["public"] == "public\n"
     assert value["hidden"] == value["listing"] == "PermissionError"
 
 
-def test_repository_and_reference_package_are_unreadable(workdir: Path) -> None:
+@pytest.mark.parametrize("shared", [False, True], ids=["own-ruleset", "shared-ruleset"])
+def test_repository_and_reference_package_are_unreadable(workdir: Path, shared: bool) -> None:
     require_landlock(1, "confining reads")
     design = REPO / "docs" / "design.md"
     source = REPO / "reference" / "_geometry.py"
@@ -335,7 +400,7 @@ def test_repository_and_reference_package_are_unreadable(workdir: Path) -> None:
             "import": _try(lambda: __import__("reference._geometry")),
         }
 
-    value = run_sandboxed(action, workdir, exclude=[REPO]).value
+    value = run_sandboxed(action, workdir, exclude=[REPO], shared=shared).value
     # FileNotFoundError where the repository is covered by an empty mount (see below)
     assert value["design"] == value["source"] in ("PermissionError", "FileNotFoundError")
     if not preloaded:
