@@ -1,8 +1,10 @@
 """Where one submission's time goes: grade hull submissions with one Grader and time each phase.
 
-Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]``.
+Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]
+[--trivial]``.
 
-Grades ``count`` submissions (the hull assignment's examples, in turn) with one
+Grades ``count`` submissions (the hull assignment's examples, in turn, or with
+``--trivial`` the one-cell, one-check assignment of ``engine_vs_peers.py``) with one
 :class:`autograder.grading.Grader`, after one warm-up submission that starts the
 warm worker and is not counted, and times each phase of every submission:
 
@@ -39,6 +41,7 @@ import argparse
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 import types
 from collections import defaultdict
@@ -226,6 +229,9 @@ def main() -> None:
                         help="git revision whose scan and sweep to compare with "
                         f"(default {BEFORE})")
     parser.add_argument("--no-before", action="store_true", help="time this code only")
+    parser.add_argument("--trivial", action="store_true",
+                        help="profile the one-cell, one-check assignment of engine_vs_peers.py "
+                        "instead of hull (the engine's own overhead)")
     options = parser.parse_args()
 
     before = None if options.no_before else load_before(options.before)
@@ -234,22 +240,39 @@ def main() -> None:
     old_sweep = lambda: len(probes) % 2 == 0  # noqa: E731 - every other submission
     instrument(lambda: probes[-1], before, old_sweep, scan_pairs)
 
-    examples = sorted((HULL / "examples").glob("*.ipynb"))
+    with tempfile.TemporaryDirectory(prefix="bench-profile-") as tmp:
+        if options.trivial:
+            sys.path.insert(0, str(ROOT / "benchmarks"))
+            from engine_vs_peers import write_trivial
+            folder, batch = write_trivial(Path(tmp), 2)
+            examples = sorted(batch.glob("*.ipynb"))
+        else:
+            folder, examples = HULL, sorted((HULL / "examples").glob("*.ipynb"))
+        rows = profile(folder, examples, options.count, probes, old_sweep, scan_pairs)
+    report(rows, scan_pairs, before is not None, options.before,
+           "trivial assignment" if options.trivial else "hull")
+
+
+def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
+            old_sweep: Callable[[], bool], scan_pairs: list[tuple[float, float, bool]],
+            ) -> list[tuple[Probe, bool, float, float]]:
+    """Grade ``count`` of ``examples`` in turn with one grader, after one warm-up submission."""
     rows: list[tuple[Probe, bool, float, float]] = []
-    with grading.Grader(load_assignment(HULL)) as grader:
-        grader.grade(HULL / "examples" / "solution.ipynb")  # warm-up: starts the worker
+    with grading.Grader(load_assignment(folder)) as grader:
+        grader.grade(examples[0])  # warm-up: starts the worker
         scan_pairs.clear()
-        for index in range(options.count):
+        for index in range(count):
             probes.append(Probe())
             wall, cpu = time.perf_counter(), time.process_time()
             grader.grade(examples[index % len(examples)])
             rows.append((probes[-1], old_sweep(), time.perf_counter() - wall,
                          time.process_time() - cpu))
-    report(rows, scan_pairs, before is not None, options.before)
+    return rows
 
 
 def report(rows: list[tuple[Probe, bool, float, float]],
-           scan_pairs: list[tuple[float, float, bool]], compared: bool, ref: str) -> None:
+           scan_pairs: list[tuple[float, float, bool]], compared: bool, ref: str,
+           name: str) -> None:
     # With --before the old sweep ran on every other submission: the breakdown uses the others.
     current = [row for row in rows if not (compared and row[1])] or rows
     for probe, _, wall, cpu in current:
@@ -260,7 +283,7 @@ def report(rows: list[tuple[Probe, bool, float, float]],
                   max(0.0, cpu - sum(probe.cpu[p] for p in PHASES[:-1])))
     means = {p: statistics.fmean(pr.total_cpu(p) for pr, *_ in current) for p in PHASES}
     total = sum(means.values()) or 1.0
-    print(f"hull, {len(rows)} submissions timed ({len(current)} in the breakdown), one Grader, "
+    print(f"{name}, {len(rows)} submissions timed ({len(current)} in the breakdown), one Grader, "
           "after one warm-up submission; CPU = grader + warm parent + child")
     print(f"{'phase':28} {'wall ms':>9} {'CPU ms':>9} {'grader':>8} {'worker':>8} "
           f"{'CPU share':>10}")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import gc
 import json
 import os
 import signal
@@ -231,6 +232,10 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     sandbox.coverable_folders([Path(p) for p in request.get("exclude", [])],
                               Path(request["workdir"]), _policy(request["policy"]))
     shared = _shared_landlock(request)
+    # Everything this process made moves to the collector's permanent generation: the
+    # child's full collections then neither walk nor copy on write the parent's
+    # objects (a cell that allocates much ran about 3x faster; benchmarks/fork_floor.py).
+    gc.freeze()
     pid = os.fork()
     if pid == 0:
         control.close()

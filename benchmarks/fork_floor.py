@@ -1,0 +1,108 @@
+"""What a fresh process per submission costs at least: fork and exit of a warm parent.
+
+Usage: ``python benchmarks/fork_floor.py [--count 40]``.
+
+The worker forks one child per submission from a warm parent that imported numpy,
+scipy, matplotlib and IPython (``autograder/worker/__main__.py``); the child runs the
+notebook and exits. The kernel's part of that (copying the parent's page tables,
+copying on write the pages the child touches, tearing the address space down at exit)
+grows with the parent's memory. This prints, in one run, the CPU milliseconds per
+fork of
+
+* a bare parent (this interpreter before any heavy import; the peer),
+* the warm parent (the worker's imports and its IPython shell),
+* the warm parent whose child also runs a one-line cell in the IPython shell,
+* the warm parent whose child runs a cell that allocates 300,000 small objects,
+  without and then with ``gc.freeze()`` in the parent before the fork (what the
+  worker does: the child's full garbage collections then skip, and so neither walk
+  nor copy on write, every object the parent made),
+
+split into the parent's share (``fork``) and the child's (everything to its exit),
+with the parent's resident memory and the ratio of each to the bare parent. The
+sandbox, the grader and the checks come on top. Not a test: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import resource
+import sys
+import time
+from typing import Callable
+
+
+def _cpu(who: int) -> float:
+    usage = resource.getrusage(who)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _rss_mib() -> float:
+    with open("/proc/self/statm") as handle:
+        return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / (1 << 20)
+
+
+def forks(count: int, body: Callable[[], object]) -> tuple[float, float, float]:
+    """Parent CPU, child CPU and wall milliseconds per fork of a child running ``body``."""
+    parent, child, wall = (_cpu(resource.RUSAGE_SELF), _cpu(resource.RUSAGE_CHILDREN),
+                           time.perf_counter())
+    for _ in range(count):
+        pid = os.fork()
+        if pid == 0:
+            try:
+                body()
+            finally:
+                os._exit(0)
+        os.waitpid(pid, 0)
+    return (1000 * (_cpu(resource.RUSAGE_SELF) - parent) / count,
+            1000 * (_cpu(resource.RUSAGE_CHILDREN) - child) / count,
+            1000 * (time.perf_counter() - wall) / count)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", type=int, default=40, help="forks per line (default 40)")
+    args = parser.parse_args(argv)
+    print(f"load average {os.getloadavg()[0]:.2f}; {args.count} forks per line; ms per fork")
+    print(f"  {'parent':<34} {'RSS MiB':>8} {'fork':>7} {'child':>7} {'CPU':>7} {'wall':>7} "
+          f"{'CPU ratio':>10}")
+    rows: list[tuple[str, float, tuple[float, float, float]]] = [
+        ("bare interpreter", _rss_mib(), forks(args.count, lambda: None))]
+
+    import matplotlib  # the warm parent's imports, as autograder.worker makes them
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401
+    import matplotlib.tri  # noqa: F401
+    import numpy  # noqa: F401
+    import scipy.interpolate  # noqa: F401
+    import scipy.linalg  # noqa: F401
+    import scipy.spatial  # noqa: F401
+    import scipy.special  # noqa: F401
+
+    from autograder.worker import execute
+
+    shell = execute.make_shell()
+    execute.warm_up(shell)
+    rows.append(("warm parent", _rss_mib(), forks(args.count, lambda: None)))
+    rows.append(("warm parent, child runs one cell", _rss_mib(), forks(
+        args.count, lambda: shell.run_cell("def double(x):\n    return 2 * x\n",
+                                           store_history=False))))
+    allocate = "points = [(i, 0.5 * i, [i]) for i in range(300_000)]\n"
+    gc.unfreeze()
+    rows.append(("warm parent, allocating cell", _rss_mib(), forks(
+        max(1, args.count // 4), lambda: shell.run_cell(allocate, store_history=False))))
+    gc.freeze()
+    rows.append(("  the same after gc.freeze()", _rss_mib(), forks(
+        max(1, args.count // 4), lambda: shell.run_cell(allocate, store_history=False))))
+    bare = sum(rows[0][2][:2])
+    for label, rss, (parent, child, wall) in rows:
+        print(f"  {label:<34} {rss:8.1f} {parent:7.1f} {child:7.1f} {parent + child:7.1f} "
+              f"{wall:7.1f} {(parent + child) / bare:9.1f}x", flush=True)
+    plain, frozen = sum(rows[-2][2][:2]), sum(rows[-1][2][:2])
+    print(f"ratio allocating cell, without / with gc.freeze(): {plain / frozen:.2f}x CPU")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
