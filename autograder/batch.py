@@ -296,9 +296,13 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
     reused = len(done)
     bar = tqdm(total=len(paths), initial=reused, unit="nb", desc=assignment.name,
                disable=(not sys.stderr.isatty()) if progress is None else not progress)
+    if todo:  # 0% for seconds otherwise: the slots import numpy, scipy and the checks first
+        bar.set_postfix_str("starting the grading workers")
 
     def finished(result: SubmissionResult) -> None:
         done[result.id] = result
+        if bar.postfix:
+            bar.set_postfix_str("", refresh=False)
         bar.update(1)
         if on_result is not None:
             on_result(result)

@@ -178,6 +178,23 @@ class Grader:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def prepare(self) -> None:
+        """Start the warm worker and collect the checks now; return once the worker is ready.
+
+        The worker imports numpy, scipy and matplotlib in its own process while this
+        one collects the checks, so the first submission waits for neither. Optional:
+        :meth:`grade` does whatever is left. A failure here (checks that cannot be
+        collected, a worker that does not start) is not raised: :meth:`grade` meets it
+        again and reports it in each submission's result, as without this call.
+        """
+        self._slot.start(wait=False)
+        try:
+            self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0, None),
+                                assignment_digest(self.assignment))
+            self._slot.start()
+        except Exception:  # see the docstring: grade() reports it with each submission
+            pass
+
     def close(self) -> None:
         try:
             self._close_checks()
@@ -249,6 +266,10 @@ class Grader:
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
             cpu_budget=budget,
             forbid=self.assignment.rules.to_wire())
+        # The checks are collected while a warm worker that is not running yet (the
+        # first submission, or after a crash) starts and imports its libraries.
+        self._slot.start(wait=False)
+        self._check_session(self._context(session, (), forbidden, seed, out_dir), digest)
         try:
             run = session.start()
             tests = self._run_checks(session, run.functions, forbidden, seed, out_dir, digest)
@@ -265,11 +286,7 @@ class Grader:
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
                     seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:
-        context = CheckContext(
-            target=target, functions=tuple(functions), forbidden=forbidden,
-            call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
-            hidden_root=self.assignment.root / "checks" / "hidden",
-            attachments=(out_dir / "images") if out_dir is not None else None)
+        context = self._context(target, functions, forbidden, seed, out_dir)
         checks = self._check_session(context, digest)
         try:
             run = checks.run(context)
@@ -283,6 +300,14 @@ class Grader:
             out_dir.mkdir(parents=True, exist_ok=True)
             (out_dir / "grader.log").write_text("\n\n".join(run.instructor_log))
         return run.results
+
+    def _context(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
+                 seed: int, out_dir: Path | None) -> CheckContext:
+        return CheckContext(
+            target=target, functions=tuple(functions), forbidden=forbidden,
+            call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
+            hidden_root=self.assignment.root / "checks" / "hidden",
+            attachments=(out_dir / "images") if out_dir is not None else None)
 
     def _check_session(self, context: CheckContext, digest: str) -> CheckSession:
         """The pytest session of the checks: kept while the assignment folder is unchanged.

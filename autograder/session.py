@@ -198,6 +198,7 @@ class WorkerSlot:
         self._python = python
         self._proc: subprocess.Popen[bytes] | None = None
         self._control: socket.socket | None = None
+        self._greeted = False  # the running warm parent said hello: it is ready to fork
         # Under ``scratch`` when the caller has a folder that is cleaned up for it (a Dask
         # worker's own directory, which Dask removes even after the worker was killed).
         # Locked while this slot lives: the next slot removes it if this grader is killed.
@@ -210,7 +211,19 @@ class WorkerSlot:
         os.chmod(self.work_root, 0o711)  # mkdir's mode is masked by the umask
         os.chmod(self._home, 0o711)
 
-    def _start(self) -> None:
+    def start(self, *, wait: bool = True) -> None:
+        """Start the warm parent unless it runs; with ``wait``, return once it is ready.
+
+        ``wait=False`` returns at once, so its imports run while the caller works (the
+        next :meth:`spawn`, or ``start()``, waits for its hello).
+        """
+        if self._proc is None or self._proc.poll() is not None:
+            self.close()
+            self._launch()
+        if wait and not self._greeted:
+            self._greet()
+
+    def _launch(self) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "HOME")}
         env.update(MPLBACKEND="Agg", MPLCONFIGDIR=str(self._home / "mpl"),
@@ -223,8 +236,12 @@ class WorkerSlot:
         )
         theirs.close()
         self._control = ours
+        self._greeted = False
+
+    def _greet(self) -> None:
+        assert self._control is not None
         try:
-            hello = protocol.recv_message(ours, timeout=STARTUP_TIMEOUT)
+            hello = protocol.recv_message(self._control, timeout=STARTUP_TIMEOUT)
         except (EOFError, OSError, protocol.ProtocolError) as exc:
             detail = self._stderr_tail()
             self.close()
@@ -232,6 +249,7 @@ class WorkerSlot:
         if not isinstance(hello, dict) or hello.get("op") != "hello":
             self.close()
             raise AutograderError("the grading worker sent an unexpected greeting")
+        self._greeted = True
 
     def _stderr_tail(self) -> str:
         if self._proc is None or self._proc.stderr is None:
@@ -245,9 +263,7 @@ class WorkerSlot:
     def spawn(self, request: dict[str, Any]) -> tuple[int, socket.socket]:
         """Fork a child for ``request``; return its pid and the grader's socket end."""
         for attempt in (1, 2):
-            if self._proc is None or self._proc.poll() is not None:
-                self.close()
-                self._start()
+            self.start()
             ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
             try:
                 assert self._control is not None
@@ -270,6 +286,7 @@ class WorkerSlot:
         return self._proc.pid if self._proc is not None and self._proc.poll() is None else None
 
     def close(self) -> None:
+        self._greeted = False
         if self._control is not None:
             self._control.close()
             self._control = None

@@ -1,16 +1,24 @@
-"""The local backend: a pool of slot processes on this machine (``--jobs N``).
+"""The local backend: this process grades as one slot, a pool of slot processes beside it (``--jobs N``).
 
-Each slot is a separate (trusted) Python process holding one :class:`Grader`
-and its warm worker; the pool hands it one file at a time, and the slot writes
-the result's files itself (same machine, same file system).
+Each slot holds one :class:`Grader` and its warm worker and grades one file at a
+time, writing the result's files itself (same machine, same file system). This
+process is slot 0: it starts its warm worker first and collects the checks while
+the worker imports its libraries; only once that worker is ready are the pool's
+``N - 1`` slot processes started (spawned: each imports the engine and starts a
+warm worker of its own), and a pool process gets a file only once it is ready
+itself. On a machine with few cores the first result then waits for one slot's
+start-up, not for every slot's at once, and a small batch never waits for the
+pool. Every slot takes the next file when it is free.
 """
 
 from __future__ import annotations
 
+import collections
 import multiprocessing
 import multiprocessing.util
 import os
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+import threading
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, Sequence
@@ -20,6 +28,7 @@ from autograder.backends import Finished, Job
 from autograder.batch import error_result, grade_one, store_error
 from autograder.grading import Grader, GradingOptions
 from autograder.results import SubmissionResult
+from autograder.sandbox import probe_support
 
 # One Grader per pool process: the warm worker is the point of the pool. This is the
 # package's only module-level state, and it lives only in pool processes.
@@ -36,6 +45,11 @@ def _init_slot(assignment_root: str, options: GradingOptions, counter: Any) -> N
     # exit finalizers are what run there. Without this the slot's warm worker and its
     # home folder (``autograder-slot-*``) outlived every ``--jobs N`` run.
     multiprocessing.util.Finalize(_GRADER, _GRADER.close, exitpriority=10)
+    _GRADER.prepare()
+
+
+def _slot_ready() -> bool:
+    return _GRADER is not None
 
 
 def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
@@ -44,7 +58,7 @@ def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
 
 
 class LocalBackend:
-    """``jobs`` slot processes (default: the number of cores); one slot runs in this process."""
+    """``jobs`` slots (default: the number of cores); slot 0 runs in this process."""
 
     def __init__(self, jobs: int | None = None) -> None:
         self.jobs = jobs
@@ -52,39 +66,146 @@ class LocalBackend:
     def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
             out_dir: Path, finished: Finished) -> None:
         slots = max(1, min(self.jobs or os.cpu_count() or 1, len(jobs) or 1))
-        if slots == 1:
-            with Grader(assignment, options) as grader:
-                for job in jobs:
+        queue = _Queue(jobs)
+        with Grader(assignment, options) as grader:
+            grader.prepare()
+            if slots == 1:
+                while (job := queue.take()) is not None:
                     finished(grade_one(grader, job.path, job.id, out_dir))
-            return
-        _run_pool(assignment, options, slots, list(jobs), out_dir, finished)
+                return
+            # Cached from here on: the sweep after a submission may probe the sandbox, which
+            # forks this process, and a fork is safest before the pool's threads exist.
+            probe_support()
+            _grade_beside_pool(grader, options, slots - 1, queue, out_dir, finished)
 
 
-def _run_pool(assignment: Assignment, options: GradingOptions, slots: int, work: list[Job],
-              out_dir: Path, finished: Finished) -> None:
-    """Run ``work`` on ``slots`` processes; if a slot process dies, rebuild and retry once."""
-    context = multiprocessing.get_context("spawn")
-    attempts: dict[str, int] = {}
-    pending = list(work)
-    while pending:
-        counter = context.Value("i", 0)
-        broken: list[Job] = []
-        with ProcessPoolExecutor(max_workers=slots, mp_context=context, initializer=_init_slot,
-                                 initargs=(str(assignment.root), options, counter)) as pool:
-            futures: dict[Future[dict[str, Any]], Job] = {
-                pool.submit(_grade_in_slot, str(j.path), j.id, str(out_dir)): j for j in pending}
-            for future in as_completed(futures):
-                job = futures[future]
-                try:
-                    finished(SubmissionResult.from_dict(future.result()))
-                except BrokenProcessPool as exc:
-                    attempts[job.id] = attempts.get(job.id, 0) + 1
-                    if attempts[job.id] >= 2:
-                        finished(store_error(out_dir, error_result(assignment, job.path, job.id, exc),
-                                             assignment.title))
-                    else:
-                        broken.append(job)
-        pending = broken
+class _Queue:
+    """The jobs no slot has taken yet, shared by this process's slot and the pool's feeder."""
+
+    def __init__(self, jobs: Sequence[Job]) -> None:
+        self._jobs = collections.deque(jobs)
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def take(self) -> Job | None:
+        with self._lock:
+            return self._jobs.popleft() if self._jobs and not self._closed else None
+
+    def give_back(self, job: Job) -> None:
+        with self._lock:
+            if not self._closed:
+                self._jobs.appendleft(job)
+
+    def __bool__(self) -> bool:
+        with self._lock:
+            return bool(self._jobs) and not self._closed
+
+    def close(self) -> None:
+        """Hand out nothing more (Ctrl-C, or a failure in another slot)."""
+        with self._lock:
+            self._closed = True
+            self._jobs.clear()
+
+
+def _grade_beside_pool(grader: Grader, options: GradingOptions, processes: int, queue: _Queue,
+                       out_dir: Path, finished: Finished) -> None:
+    """Grade in this thread while a feeder thread keeps ``processes`` pool processes busy."""
+    lock = threading.Lock()
+
+    def report(result: SubmissionResult) -> None:
+        with lock:
+            finished(result)
+
+    feeder = _PoolFeeder(grader.assignment, options, processes, queue, out_dir, report)
+    feeder.start()
+    try:
+        while (job := queue.take()) is not None:
+            report(grade_one(grader, job.path, job.id, out_dir))
+    except BaseException:
+        queue.close()  # the pool finishes the files it holds (whole results), and stops
+        raise
+    finally:
+        feeder.join()
+    if feeder.failure is not None:
+        raise feeder.failure
+
+
+class _PoolFeeder(threading.Thread):
+    """Hands a job to a pool process only once that process is ready (warm), one job each.
+
+    Until then this process's slot takes every job, so a small batch never waits for
+    the pool's start-up. If a slot process dies, the pool is rebuilt and its job is
+    retried once (a second death is an "error" result for that job); a pool that
+    broke before any of its processes was ready is not rebuilt, and this process's
+    slot grades what is left.
+    """
+
+    def __init__(self, assignment: Assignment, options: GradingOptions, processes: int,
+                 queue: _Queue, out_dir: Path, report: Finished) -> None:
+        super().__init__(name="autograder-pool-feeder", daemon=True)
+        self._assignment, self._options, self._processes = assignment, options, processes
+        self._queue, self._out_dir, self._report = queue, out_dir, report
+        self._attempts: dict[str, int] = {}
+        self.failure: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            while self._one_pool():
+                pass
+        except BaseException as exc:  # the pool itself could not be run
+            self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        """Stop handing out jobs; ``exc`` is raised again in the thread that runs the batch."""
+        if self.failure is None:
+            self.failure = exc
+        self._queue.close()
+
+    def _one_pool(self) -> bool:
+        """Feed one pool until no job is left; True when it broke and is worth rebuilding."""
+        if not self._queue:
+            return False
+        context = multiprocessing.get_context("spawn")
+        counter = context.Value("i", 1)  # slot 0 is this process's
+        with ProcessPoolExecutor(max_workers=self._processes, mp_context=context,
+                                 initializer=_init_slot,
+                                 initargs=(str(self._assignment.root), self._options, counter)) as pool:
+            # A call runs once its process's initializer is done: its answer says "ready".
+            running: dict[Future[Any], Job | None] = {
+                pool.submit(_slot_ready): None for _ in range(self._processes)}
+            broken = ready = False
+            while running:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in done:
+                    job = running.pop(future)
+                    died = self._collect(future, job)
+                    broken = broken or died
+                    ready = ready or (job is None and not died)
+                    if not broken and (job := self._queue.take()) is not None:
+                        running[pool.submit(_grade_in_slot, str(job.path), job.id,
+                                            str(self._out_dir))] = job
+            return broken and ready
+
+    def _collect(self, future: Future[Any], job: Job | None) -> bool:
+        """Report ``job``'s result (None: a ready call); True when its slot process died."""
+        try:
+            try:
+                answer = future.result()
+            except BrokenProcessPool as exc:
+                if job is None:
+                    return True
+                self._attempts[job.id] = self._attempts.get(job.id, 0) + 1
+                if self._attempts[job.id] < 2:
+                    self._queue.give_back(job)
+                    return True
+                self._report(store_error(self._out_dir, error_result(
+                    self._assignment, job.path, job.id, exc), self._assignment.title))
+                return True
+            if job is not None:
+                self._report(SubmissionResult.from_dict(answer))
+        except BaseException as exc:  # Ctrl-C in a slot process, or ``finished`` failed:
+            self._fail(exc)  # the results of the other files still running are reported
+        return False
 
 
 __all__ = ["LocalBackend"]
