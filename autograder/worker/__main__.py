@@ -139,22 +139,22 @@ _APPLIED: list[str | None] = [None]
 _SHARED: list[sandbox.SharedLandlock | None] = [None]
 
 
-def _shared_landlock(request: dict[str, Any]) -> sandbox.SharedLandlock | None:
+def _shared_landlock(request: dict[str, Any], policy: sandbox.IsolationPolicy, workdir: Path,
+                     exclude: list[Path]) -> sandbox.SharedLandlock | None:
     """The ruleset for this request's child, built here once for the slot's work root.
 
-    None when the grader named no work root (the child then builds its own).
+    None when the grader named no work root, or one ``workdir`` is not directly in
+    (the child then builds its own).
     """
     root = request.get("workroot")
-    if not isinstance(root, str):
+    if not isinstance(root, str) or workdir.resolve().parent != Path(root).resolve():
         return None
-    policy, workdir = _policy(request["policy"]), Path(request["workdir"])
-    exclude = [Path(p) for p in request.get("exclude", [])]
     current = _SHARED[0]
     if current is None or not current.serves(policy, workdir, exclude):
         if current is not None:
             current.close()
         current = _SHARED[0] = sandbox.shared_landlock(policy, Path(root), exclude)
-    return current if current.serves(policy, workdir, exclude) else None
+    return current
 
 
 def _forbid_key(request: dict[str, Any]) -> str:
@@ -229,9 +229,10 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     # Computed here, once, so every forked child inherits the cached lists (a child
     # that computed them itself would pay about half a second): the folders to cover
     # are found from the readable paths, which this fills the cache with too.
-    sandbox.coverable_folders([Path(p) for p in request.get("exclude", [])],
-                              Path(request["workdir"]), _policy(request["policy"]))
-    shared = _shared_landlock(request)
+    policy, workdir = _policy(request["policy"]), Path(request["workdir"])
+    exclude = [Path(p) for p in request.get("exclude", [])]
+    sandbox.coverable_folders(exclude, workdir, policy)
+    shared = _shared_landlock(request, policy, workdir, exclude)
     # Everything this process made moves to the collector's permanent generation: the
     # child's full collections then neither walk nor copy on write the parent's
     # objects (a cell that allocates much ran about 3x faster; benchmarks/fork_floor.py).
