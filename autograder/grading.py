@@ -191,6 +191,8 @@ class Grader:
         try:
             self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0, None),
                                 assignment_digest(self.assignment))
+            if self.assignment.rules.forbid:  # imports IPython's transformer meanwhile too
+                staticscan.scan((), self.assignment.rules.forbid)
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass

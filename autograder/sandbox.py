@@ -75,6 +75,8 @@ __all__ = [
     "clean_environment",
     "coverable_folders",
     "enter_sandbox",
+    "prepare_cgroup",
+    "prime_caches",
     "probe_support",
     "readable_paths",
     "shared_landlock",
@@ -440,6 +442,18 @@ def readable_paths(exclude: Sequence[Path], *, extra: Sequence[Path] = ()) -> li
     return list(_readable_paths_cached(tuple(map(str, exclude)), tuple(map(str, extra))))
 
 
+def prime_caches() -> None:
+    """Fill the caches every request needs, whatever it excludes.
+
+    The warm parent calls it while it starts, so its first submission does not pay
+    for listing the installed distributions and walking the readable roots (about
+    half a second); what depends on a request's exclusions is computed at its first
+    spawn.
+    """
+    _hidden_installed_paths()
+    readable_paths([])
+
+
 @functools.lru_cache(maxsize=16)
 def _readable_paths_cached(exclude: tuple[str, ...], extra: tuple[str, ...]) -> tuple[Path, ...]:
     # Walking site-packages costs tens of milliseconds; the warm parent computes the
@@ -670,9 +684,16 @@ def coverable_folders(exclude: Sequence[Path], workdir: Path,
     root (a venv inside the repository) nor the working directory; none inside
     another. The warm parent computes this once (cached) before it forks.
     """
+    return _coverable_for(tuple(map(str, exclude)), str(workdir), policy.allowed_read)
+
+
+@functools.lru_cache(maxsize=32)
+def _coverable_for(exclude: tuple[str, ...], workdir: str,
+                   allowed: tuple[str, ...]) -> tuple[Path, ...]:
+    # Cached too: the warm parent's call for a request fills it for the child it forks.
     work = _resolve(workdir)
     found: list[Path] = []
-    for folder in _coverable(tuple(map(str, exclude)), tuple(map(str, policy.allowed_read))):
+    for folder in _coverable(exclude, allowed):
         if not work.is_relative_to(folder) and not any(folder.is_relative_to(f) for f in found):
             found.append(folder)
     return tuple(found)
@@ -701,11 +722,26 @@ def _join_cgroup(policy: IsolationPolicy, slot: int, notes: list[str]) -> None:
     if group is None:
         notes.append("slot cgroup skipped: no usable cgroup hierarchy")
         return
-    _attempt(notes, "slot cgroup", lambda: _join(group))
+    _attempt(notes, "slot cgroup", lambda: _join(group, slot, policy.limits.processes))
 
 
-def _join(group: cgroups.SlotCgroup) -> str:
-    group.join()
+def prepare_cgroup(policy: IsolationPolicy, slot: int) -> None:
+    """Make and configure the slot's cgroup in the warm parent, once, before it forks.
+
+    Every child then only joins it (see :func:`_join_cgroup`); nothing happens for
+    an ordinary user or a policy without cgroups.
+    """
+    if policy.cgroup and os.geteuid() == 0:
+        cgroups.slot_cgroup(slot, processes=policy.limits.processes)
+
+
+def _join(group: cgroups.SlotCgroup, slot: int, processes: int) -> str:
+    try:
+        group.join()
+    except FileNotFoundError:  # removed since the warm parent made it: make it again
+        cgroups.forget_created()
+        group = cgroups.slot_cgroup(slot, processes=processes) or group
+        group.join()
     return f"slot cgroup v{group.version}: {', '.join(str(d) for d in group.dirs)}"
 
 
@@ -959,7 +995,13 @@ def shared_landlock(policy: IsolationPolicy, work_root: Path,
 def _landlock_key(policy: IsolationPolicy, work_root: Path,
                   exclude: Sequence[Path]) -> tuple[object, ...]:
     return (policy.landlock, tuple(policy.allowed_read), str(work_root),
-            tuple(sorted(str(_resolve(p)) for p in exclude)))
+            _resolved_sorted(tuple(map(str, exclude))))
+
+
+@functools.lru_cache(maxsize=32)
+def _resolved_sorted(paths: tuple[str, ...]) -> tuple[str, ...]:
+    # Cached: the warm parent resolves a request's exclusions, the child it forks reuses them.
+    return tuple(sorted(str(_resolve(p)) for p in paths))
 
 
 def _write_layer(workdir: Path, notes: list[str]) -> Ruleset | None:

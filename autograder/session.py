@@ -175,6 +175,18 @@ def claim_slot(first: int = 0) -> tuple[int, int]:
                           "is another grader stuck?")
 
 
+def matplotlib_folder() -> Path:
+    """Matplotlib's folder for the warm parents of this user, kept from run to run.
+
+    In the private folder of :func:`slot_lock_dir`: matplotlib builds its font list
+    there once (about half a CPU second) instead of at every warm parent's start, and
+    no other user can plant a file in it. The sandboxed children have one of their own.
+    """
+    folder = _private_folder(slot_lock_dir()) / "matplotlib"
+    folder.mkdir(mode=0o700, exist_ok=True)
+    return folder
+
+
 #: the most characters of captured output the grader keeps from the worker
 OUTPUT_CAP = 1 << 20
 #: the most cell reports kept (each holds at most a 20,000-character traceback)
@@ -226,7 +238,7 @@ class WorkerSlot:
     def _launch(self) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "HOME")}
-        env.update(MPLBACKEND="Agg", MPLCONFIGDIR=str(self._home / "mpl"),
+        env.update(MPLBACKEND="Agg", MPLCONFIGDIR=str(matplotlib_folder()),
                    OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1",
                    PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         self._proc = subprocess.Popen(
@@ -649,7 +661,8 @@ def sweep_slot(policy: IsolationPolicy, slot: int, warm_parent: int | None,
     descendant of the warm parent. An ordinary user: every descendant of the warm
     parent.
 
-    ``child`` (its pid and the pidfd from :func:`child_pidfd`) spares the reading of
+    ``child`` (its pid and the pidfd from :func:`child_pidfd`, already sent ``SIGKILL``
+    by :func:`kill_child`) spares the cgroup's freeze while it alone is left, and the reading of
     ``/proc`` for the slot's user in the common case: when the child is still in the
     slot's cgroup at the sweep and the cgroup is empty afterwards, every process the
     submission started was in it (the child joins it as root, before it takes the
@@ -666,7 +679,10 @@ def sweep_slot(policy: IsolationPolicy, slot: int, warm_parent: int | None,
     contained = False
     if group is not None:
         contained = child is not None and _in_cgroup(group, *child)
-        contained = group.kill_all() and contained
+        # The child was killed before the sweep: while it alone is listed, the sweep
+        # waits for it to exit rather than freezing the slot for a kill round.
+        known = {child[0]: os.dup(child[1])} if child is not None and contained else {}
+        contained = group.kill_all(killed=known) and contained
     if policy.drop_user:
         kill_user(policy.base_uid + slot, confirm=not contained)
     elif group is None and warm_parent is not None:

@@ -43,8 +43,6 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Callable, Iterable, Sequence
 
-from IPython.core.inputtransformer2 import TransformerManager
-
 from autograder.errors import UsageError
 
 __all__ = ["Use", "ScanReport", "scan"]
@@ -256,6 +254,10 @@ class _Analyzer:
         self.uses: list[Use] = []
         self.dynamic: list[Use] = []
         self.errors: list[str] = []
+        # Imported here, not at the top: importing IPython costs the grader 0.2 s, and
+        # the command starts its warm worker before its first scan.
+        from IPython.core.inputtransformer2 import TransformerManager
+
         self.transformer = TransformerManager()
         #: statements walked so far; past MAX_STATEMENTS the scan stops (a count, not a
         #: clock, so the same code always gets the same report)

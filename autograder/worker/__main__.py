@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import functools
 import gc
 import json
 import os
@@ -168,14 +169,9 @@ def _apply_forbid(request: dict[str, Any]) -> list[str]:
                         reason=str(rules.get("reason", "")))
 
 
-def _unreadable_path() -> tuple[str, str] | None:
-    """The first file student code needs that the sandbox does not let it read, if any.
-
-    The standard library, numpy, scipy, matplotlib and IPython must be readable
-    wherever they are installed (a venv inside the repository, ``/autograder``,
-    beside a release folder); otherwise the grader reports an engine error
-    instead of letting every import in the notebook fail.
-    """
+@functools.cache
+def _probes() -> tuple[str, ...]:
+    """The files :func:`_unreadable_path` opens (listed once, in the warm parent)."""
     stdlib = sysconfig.get_paths()["stdlib"]
     # Files only, for the standard library: its folder may be split into one rule per
     # entry (site-packages inside it holds the grader's own packages), and imports
@@ -187,7 +183,18 @@ def _unreadable_path() -> tuple[str, str] | None:
         origin = getattr(module, "__file__", None)
         if origin:  # the file itself: a package folder may be split around a forbidden module
             probes.append(origin)
-    for path in probes:
+    return tuple(probes)
+
+
+def _unreadable_path() -> tuple[str, str] | None:
+    """The first file student code needs that the sandbox does not let it read, if any.
+
+    The standard library, numpy, scipy, matplotlib and IPython must be readable
+    wherever they are installed (a venv inside the repository, ``/autograder``,
+    beside a release folder); otherwise the grader reports an engine error
+    instead of letting every import in the notebook fail.
+    """
+    for path in _probes():
         try:
             if os.path.isdir(path):
                 os.listdir(path)
@@ -232,6 +239,8 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     policy, workdir = _policy(request["policy"]), Path(request["workdir"])
     exclude = [Path(p) for p in request.get("exclude", [])]
     sandbox.coverable_folders(exclude, workdir, policy)
+    sandbox.prepare_cgroup(policy, int(request["slot"]))
+    _probes()
     shared = _shared_landlock(request, policy, workdir, exclude)
     # Everything this process made moves to the collector's permanent generation: the
     # child's full collections then neither walk nor copy on write the parent's
@@ -255,6 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     shell = execute.make_shell()
     execute.warm_up(shell)
     figures.close_all()
+    sandbox.prime_caches()
     signal.signal(signal.SIGCHLD, _reap)
     protocol.send_message(control, {"op": "hello", "pid": os.getpid(),
                                     "python": sys.version.split()[0], "time": time.time()})

@@ -141,21 +141,94 @@ def test_every_slot_gets_the_same_cpu_weight() -> None:
     assert any((d / "cpu.shares").exists() or (d / "cpu.weight").exists() for d in group.dirs)
 
 
-def test_child_enters_its_slot_cgroup(tmp_path: Path, reaped: list[int]) -> None:
-    group = require_cgroups()
+def sandboxed_child_cgroups(workdir: Path, reaped: list[int]) -> str:
+    """The sandbox's notes and ``/proc/self/cgroup`` of a child that entered it in slot SLOT."""
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:
         try:
-            enter_sandbox(IsolationPolicy(), tmp_path, slot=SLOT)
-            os.write(write_fd, Path("/proc/self/cgroup").read_bytes())
+            notes = enter_sandbox(IsolationPolicy(), workdir, slot=SLOT)
+            os.write(write_fd, ("\n".join(notes) + "\n" + Path("/proc/self/cgroup").read_text())
+                     .encode())
         finally:
             os._exit(0)
     reaped.append(pid)
     os.close(write_fd)
     with os.fdopen(read_fd, "rb") as pipe:
-        text = pipe.read().decode()
+        return pipe.read().decode()
+
+
+def test_child_enters_its_slot_cgroup(tmp_path: Path, reaped: list[int]) -> None:
+    require_cgroups()
+    text = sandboxed_child_cgroups(tmp_path, reaped)
     assert f"/{cgroups.GROUP}/slot-{SLOT}" in text, text
+
+
+def test_a_child_makes_its_slot_cgroup_again_if_it_was_removed(tmp_path: Path,
+                                                              reaped: list[int]) -> None:
+    # The warm parent makes the slot's cgroup once and its children only join it; one
+    # removed meanwhile (by an administrator, a clean-up script) is made again.
+    group = require_cgroups()
+    assert group.kill_all()
+    for directory in group.dirs + ((group.freezer,) if group.freezer else ()):
+        directory.rmdir()
+    text = sandboxed_child_cgroups(tmp_path, reaped)
+    assert f"/{cgroups.GROUP}/slot-{SLOT}" in text, text
+    assert all(directory.is_dir() for directory in group.dirs)
+    assert (cgroups.slot_cgroup(SLOT, processes=64, create=False) or group).pids() == set()
+
+
+def test_a_sweep_waits_for_a_killed_child_without_a_kill_round(
+        reaped: list[int], monkeypatch: pytest.MonkeyPatch) -> None:
+    group = require_cgroups()
+    rounds: list[int] = []
+    kill_round = cgroups.SlotCgroup._kill_round
+
+    def counted(self: cgroups.SlotCgroup, killed: dict[int, int]) -> None:
+        rounds.append(len(killed))
+        kill_round(self, killed)
+
+    monkeypatch.setattr(cgroups.SlotCgroup, "_kill_round", counted)
+    read_fd, write_fd = os.pipe()
+    started = []
+    for _ in range(2):
+        pid = os.fork()
+        if pid == 0:
+            try:
+                group.join()
+                os.write(write_fd, b".")
+                time.sleep(60)
+            finally:
+                os._exit(0)
+        reaped.append(pid)
+        started.append(pid)
+    for _ in started:
+        assert os.read(read_fd, 1) == b"."
+    os.close(read_fd)
+    os.close(write_fd)
+    known, other = started
+    fd = os.pidfd_open(known)
+    signal.pidfd_send_signal(fd, signal.SIGKILL)
+    # The one the caller killed is only waited for; the other is killed by a round.
+    assert group.kill_all(killed={known: fd})
+    assert group.pids() == set()
+    assert len(rounds) == 1
+    rounds.clear()
+    pid = os.fork()
+    if pid == 0:
+        try:
+            group.join()
+            time.sleep(60)
+        finally:
+            os._exit(0)
+    reaped.append(pid)
+    deadline = time.monotonic() + DEADLINE
+    while pid not in group.pids() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    fd = os.pidfd_open(pid)
+    signal.pidfd_send_signal(fd, signal.SIGKILL)
+    assert group.kill_all(killed={pid: fd})
+    assert rounds == [], "a killed child alone in the slot needs no kill round"
 
 
 def test_kill_all_ends_a_process_that_reforks(reaped: list[int]) -> None:

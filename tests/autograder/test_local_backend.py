@@ -17,11 +17,13 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import psutil
 import pytest
 
 from autograder import api
+from autograder.backends import local
 from autograder.results import SubmissionResult
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -52,6 +54,7 @@ def test_a_killed_slot_process_costs_no_submission(tmp_path: Path,
     monkeypatch.setenv("TMPDIR", str(scratch))
     monkeypatch.setattr(tempfile, "tempdir", None)
     killed: list[int] = []
+    pool_reported = threading.Event()
 
     def kill_the_pool(result: SubmissionResult) -> None:
         # Once, at the first result a pool process graded (reported from the pool's
@@ -61,11 +64,20 @@ def test_a_killed_slot_process_costs_no_submission(tmp_path: Path,
             for proc in slot_processes():
                 proc.kill()
                 killed.append(proc.pid)
+            pool_reported.set()
 
+    # This process's slot starts grading only once the pool has graded one file, so
+    # however fast this slot is, the pool gets files to lose.
+    grade_here = local.grade_one
+
+    def grade_after_the_pool(*args: Any, **kwargs: Any) -> SubmissionResult:
+        pool_reported.wait(timeout=600)
+        return grade_here(*args, **kwargs)
+
+    monkeypatch.setattr(local, "grade_one", grade_after_the_pool)
     report = api.grade("hull", [submissions], out=tmp_path / "out", jobs=3, progress=False,
                        on_result=kill_the_pool)
-    if not killed:
-        pytest.skip("this process's slot graded every submission before the pool was ready")
+    assert killed, "no pool process graded a file"
     assert sorted(r.id for r in report.results) == [f"student{k:02d}" for k in range(12)]
     assert {r.outcome for r in report.results} == {"graded"}
     assert all(r.score == r.max_score for r in report.results)

@@ -1,14 +1,17 @@
-"""Folders that a killed owner leaves behind are removed by the next owner."""
+"""Folders that a killed owner leaves behind are removed by the next owner; the one
+folder that is meant to outlive its owners (matplotlib's) is private."""
 
 from __future__ import annotations
 
 import fcntl
 import os
+import stat
 import time
 from pathlib import Path
 
 import pytest
 
+from autograder.session import WorkerSlot, matplotlib_folder
 from autograder.tempdirs import GRACE_SECONDS, LOCK_NAME, OwnedFolder, remove_abandoned
 
 PREFIX = "autograder-test-"
@@ -75,3 +78,22 @@ def test_a_folder_of_another_user_stays(tmp_path: Path) -> None:
         os.chown(path, 65534, 65534)
     assert remove_abandoned(tmp_path, prefix=PREFIX) == []
     assert left.exists()
+
+
+def test_warm_parents_keep_one_private_matplotlib_folder() -> None:
+    # Matplotlib builds its font list in MPLCONFIGDIR; a folder per slot would rebuild
+    # it at every warm parent's start. One private folder per user outlives them.
+    slot = WorkerSlot(slot=0)
+    try:
+        slot.start()
+        assert slot.warm_parent is not None
+        environ = Path(f"/proc/{slot.warm_parent}/environ").read_bytes().split(b"\0")
+        folder = matplotlib_folder()
+        assert f"MPLCONFIGDIR={folder}".encode() in environ
+        info = folder.stat()
+        assert info.st_uid == os.geteuid() and stat.S_IMODE(info.st_mode) == 0o700
+        assert stat.S_IMODE(folder.parent.stat().st_mode) == 0o700
+        assert list(folder.glob("fontlist-*.json")), "matplotlib wrote no font list there"
+    finally:
+        slot.shutdown()
+    assert folder.is_dir()
