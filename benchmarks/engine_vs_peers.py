@@ -14,7 +14,9 @@ What it prints (medians are not used: each figure is one run over the batch):
   cells) and ``otter run`` (the same test cells as OK tests), each with
   submissions/s, CPU per submission split into grader and worker, and every ratio;
 * a trivial assignment (one cell, one check) built in a temporary folder: the
-  engine overhead, total CPU per submission minus the floor's.
+  engine overhead, total CPU per submission minus the floor's, with start-up spread
+  over the batch and, from a 10-submission batch run beside it, beyond start-up
+  (what one more submission costs, and the rate of a long batch).
 
 CPU is measured from outside: ``resource.getrusage(RUSAGE_CHILDREN)`` around each
 command (every process it reaped) and, for the split and for processes nobody
@@ -322,17 +324,48 @@ def print_ratios(runs: list[Run]) -> None:
                   f"{by[a].cpu_ms / by[b].cpu_ms:6.2f}x CPU per submission", flush=True)
 
 
+#: submissions of the short trivial batch, whose figures are taken off the long one's
+SHORT = 10
+
+
 def trivial_overhead(work: Path, count: int) -> None:
-    """The engine overhead: CPU per submission of a one-cell, one-check assignment minus the floor's."""
+    """The engine overhead: CPU per submission of a one-cell, one-check assignment minus the floor's.
+
+    Printed twice: with start-up spread over the batch (the rows), and per
+    submission beyond start-up, from a short batch of :data:`SHORT` run beside the
+    long one (its CPU and seconds taken off the long batch's: what one more
+    submission costs, and the rate at which a long batch goes).
+    """
     folder, batch = write_trivial(work, count)
+    notebooks = sorted(batch.glob("*.ipynb"))
+    short = work / "trivial-short"
+    short.mkdir()
+    for path in notebooks[:SHORT]:
+        shutil.copy(path, short / path.name)
     print_header(f"trivial assignment (one cell, one check), {count} submissions")
-    floor = print_row(run_floor(folder, sorted(batch.glob("*.ipynb")), False))
+    floor = print_row(run_floor(folder, notebooks, False))
     engine = [print_row(run_engine(folder, batch, work / f"tout-{j}", j, False, count))
               for j in (1, 2)]
     print_ratios([floor, *engine])
     for r in engine:
         print(f"  engine overhead, {r.label}: {r.cpu_ms - floor.cpu_ms:.1f} ms CPU per "
-              f"submission (total {r.cpu_ms:.1f} - floor {floor.cpu_ms:.1f})", flush=True)
+              f"submission, start-up included (total {r.cpu_ms:.1f} - floor {floor.cpu_ms:.1f})",
+              flush=True)
+    if count <= SHORT:
+        return
+    extra = count - SHORT
+    floor_short = run_floor(folder, notebooks[:SHORT], False)
+    floor_ms = 1000 * (floor.cpu - floor_short.cpu) / extra
+    print(f"  beyond start-up (the {count}-submission runs minus {SHORT}-submission runs):")
+    print(f"    bare floor: {floor_ms:.1f} ms CPU per submission")
+    for jobs, long in zip((1, 2), engine):
+        cut = run_engine(folder, short, work / f"tout-short-{jobs}", jobs, False, SHORT)
+        cpu_ms = 1000 * (long.cpu - cut.cpu) / extra
+        worker_ms = 1000 * (long.worker_cpu - cut.worker_cpu) / extra
+        rate = extra / (long.wall - cut.wall)
+        print(f"    {long.label}: {cpu_ms:.1f} ms CPU per submission (grader {cpu_ms - worker_ms:.1f}, "
+              f"worker {worker_ms:.1f}), {rate:.1f} submissions/s; engine overhead "
+              f"{cpu_ms - floor_ms:.1f} ms", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -61,7 +61,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot  # noqa: E402,F401
 import matplotlib.tri  # noqa: E402,F401
 
-from autograder import protocol, sandbox  # noqa: E402
+from autograder import protocol, sandbox, syscalls  # noqa: E402
 from autograder.worker import execute, figures, guard, serve  # noqa: E402
 
 def _adopt_orphans() -> None:
@@ -265,6 +265,7 @@ def main(argv: list[str] | None = None) -> int:
     execute.warm_up(shell)
     figures.close_all()
     sandbox.prime_caches()
+    syscalls.prepare_filters()
     signal.signal(signal.SIGCHLD, _reap)
     protocol.send_message(control, {"op": "hello", "pid": os.getpid(),
                                     "python": sys.version.split()[0], "time": time.time()})
