@@ -154,8 +154,10 @@ def _wait_for_exit(killed: dict[int, int], listed: set[int], exited: set[int],
     if not waiting or len(waiting) + len(exited & listed) < len(listed):
         time.sleep(pause)
         return
-    readable, _, _ = select.select(list(waiting), [], [], ROUND_PAUSE)
-    exited.update(waiting[fd] for fd in readable)
+    poller = select.poll()  # not select(): a pidfd may be numbered above FD_SETSIZE
+    for fd in waiting:
+        poller.register(fd, select.POLLIN)
+    exited.update(waiting[fd] for fd, _ in poller.poll(ROUND_PAUSE * 1000))
 
 
 def _pause(attempt: int) -> float:
