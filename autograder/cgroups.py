@@ -31,8 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SlotCgroup", "cgroup_support", "forget_created", "pidfd_kill", "pidfd_open", "pidfd_unreaped",
-           "pidfds_supported", "signal_listed", "slot_cgroup"]
+__all__ = ["SlotCgroup", "cgroup_support", "forget_created", "pidfd_kill", "pidfd_open",
+           "pidfd_unreaped", "pidfds_supported", "signal_listed", "slot_cgroup"]
 
 CGROUP_ROOT = Path("/sys/fs/cgroup")
 #: name of the grader's folder in each hierarchy

@@ -662,12 +662,12 @@ def sweep_slot(policy: IsolationPolicy, slot: int, warm_parent: int | None,
     parent.
 
     ``child`` (its pid and the pidfd from :func:`child_pidfd`, already sent ``SIGKILL``
-    by :func:`kill_child`) spares the cgroup's freeze while it alone is left, and the reading of
-    ``/proc`` for the slot's user in the common case: when the child is still in the
-    slot's cgroup at the sweep and the cgroup is empty afterwards, every process the
-    submission started was in it (the child joins it as root, before it takes the
-    slot's user and runs any student code, and only root can move a process out),
-    and is gone. The user's ``kill(-1)`` is still sent, for anything of that user
+    by :func:`kill_child`) spares the cgroup's freeze while it alone is left, and the
+    reading of ``/proc`` for the slot's user in the common case: when the child is
+    still in the slot's cgroup at the sweep and the cgroup is empty afterwards, every
+    process the submission started was in it (the child joins it as root, before it
+    takes the slot's user and runs any student code, and only root can move a process
+    out), and is gone. The user's ``kill(-1)`` is still sent, for anything of that user
     outside the cgroup.
     """
     if os.geteuid() != 0:

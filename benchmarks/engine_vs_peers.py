@@ -363,9 +363,9 @@ def trivial_overhead(work: Path, count: int) -> None:
         cpu_ms = 1000 * (long.cpu - cut.cpu) / extra
         worker_ms = 1000 * (long.worker_cpu - cut.worker_cpu) / extra
         rate = extra / (long.wall - cut.wall)
-        print(f"    {long.label}: {cpu_ms:.1f} ms CPU per submission (grader {cpu_ms - worker_ms:.1f}, "
-              f"worker {worker_ms:.1f}), {rate:.1f} submissions/s; engine overhead "
-              f"{cpu_ms - floor_ms:.1f} ms", flush=True)
+        print(f"    {long.label}: {cpu_ms:.1f} ms CPU per submission (grader "
+              f"{cpu_ms - worker_ms:.1f}, worker {worker_ms:.1f}), {rate:.1f} submissions/s; "
+              f"engine overhead {cpu_ms - floor_ms:.1f} ms", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:
