@@ -17,6 +17,7 @@ import collections
 import multiprocessing
 import multiprocessing.util
 import os
+import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -166,13 +167,28 @@ class _PoolFeeder(threading.Thread):
         if not self._queue:
             return False
         context = multiprocessing.get_context("spawn")
-        counter = context.Value("i", 1)  # slot 0 is this process's
-        with ProcessPoolExecutor(max_workers=self._processes, mp_context=context,
-                                 initializer=_init_slot,
-                                 initargs=(str(self._assignment.root), self._options, counter)) as pool:
-            # A call runs once its process's initializer is done: its answer says "ready".
-            running: dict[Future[Any], Job | None] = {
-                pool.submit(_slot_ready): None for _ in range(self._processes)}
+        try:
+            counter = context.Value("i", 1)  # slot 0 is this process's
+            pool = ProcessPoolExecutor(max_workers=self._processes, mp_context=context,
+                                       initializer=_init_slot,
+                                       initargs=(str(self._assignment.root), self._options,
+                                                 counter))
+            try:
+                # A call runs once its process's initializer is done: its answer says "ready".
+                running: dict[Future[Any], Job | None] = {
+                    pool.submit(_slot_ready): None for _ in range(self._processes)}
+            except BaseException:
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+        except OSError as exc:
+            # multiprocessing could not set the pool up (seen once in CI: its resource
+            # tracker's pipe was broken): nothing is lost, this process's slot grades
+            # every file that is left, and the instructor is told why it is slower.
+            print(f"autograder: could not start {self._processes} more grading "
+                  f"process(es) ({type(exc).__name__}: {exc}); this process grades every "
+                  "remaining submission.", file=sys.stderr, flush=True)
+            return False
+        with pool:
             broken = ready = False
             while running:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)

@@ -8,6 +8,7 @@ and no process or folder of the run is left behind.
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import shutil
 import signal
@@ -83,6 +84,23 @@ def test_a_killed_slot_process_costs_no_submission(tmp_path: Path,
     assert all(r.score == r.max_score for r in report.results)
     stored = sorted(p.parent.name for p in (tmp_path / "out").glob("*/results.json"))
     assert stored == [r.id for r in report.results]
+
+
+def test_a_pool_that_cannot_start_costs_no_submission(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    # Seen once in CI: multiprocessing's resource tracker pipe was broken when the pool
+    # was set up. This process's slot then grades every file, and says why.
+    submissions = copies(tmp_path / "in", 3)
+
+    def broken(*args: Any, **kwargs: Any) -> Any:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(multiprocessing.get_context("spawn"), "Value", broken)
+    report = api.grade("hull", [submissions], out=tmp_path / "out", jobs=2, progress=False)
+    assert sorted(r.id for r in report.results) == ["student00", "student01", "student02"]
+    assert all(r.outcome == "graded" and r.score == r.max_score for r in report.results)
+    assert "could not start 1 more grading process(es) (BrokenPipeError" in capsys.readouterr().err
 
 
 def test_ctrl_c_keeps_whole_results_and_leaves_nothing_behind(tmp_path: Path) -> None:
