@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import autograder
-from autograder import staticscan
+from autograder import affinity, staticscan
 from autograder.assignment import Assignment
 from autograder.checksession import CheckSession, forget_check_modules
 from autograder.errors import NotebookError, WorkerCrashed
@@ -272,11 +272,15 @@ class Grader:
         # first submission, or after a crash) starts and imports its libraries.
         self._slot.start(wait=False)
         self._check_session(self._context(session, (), forbidden, seed, out_dir), digest)
-        try:
-            run = session.start()
-            tests = self._run_checks(session, run.functions, forbidden, seed, out_dir, digest)
-        finally:
-            session.close()
+        # This thread and the child take turns (a call waits for its answer): on the
+        # slot's core, a message does not have to wake another core (autograder.affinity).
+        with affinity.on_core(self._slot.core):
+            try:
+                run = session.start()
+                tests = self._run_checks(session, run.functions, forbidden, seed, out_dir,
+                                         digest)
+            finally:
+                session.close()
         outcome = ("timeout" if run.timed_out_cells else
                    "crashed" if run.crashed or run.crashed_cells else "graded")
         result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)

@@ -886,28 +886,33 @@ def recv_frame(
     """
     deadline = None if timeout is None else time.monotonic() + timeout
     previous = sock.gettimeout()
+    # The socket's timeout is changed only when a read has to wait for the deadline
+    # (see _recv_exactly), and put back only then; a socket that has a timeout of its
+    # own is read as before (its reads wait in poll, so they cannot be tried at once).
+    waited = [deadline is not None and previous is not None]
     try:
-        raw = _recv_exactly(sock, _HEADER_LEN.size, deadline, "frame length")
+        raw = _recv_exactly(sock, _HEADER_LEN.size, deadline, "frame length", waited)
         (header_len,) = _HEADER_LEN.unpack(raw)
         if _HEADER_LEN.size + header_len > max_bytes:
             limit = _size(max_bytes)
             raise ProtocolError(f"frame header of {_size(header_len)} exceeds the {limit} limit")
-        tree, lengths = _parse_header(_recv_exactly(sock, header_len, deadline, "frame header"))
+        tree, lengths = _parse_header(_recv_exactly(sock, header_len, deadline, "frame header",
+                                                    waited))
         total = _HEADER_LEN.size + header_len + sum(_BUF_LEN.size + n for n in lengths)
         if total > max_bytes:
             raise ProtocolError(f"frame of {_size(total)} exceeds the {_size(max_bytes)} limit")
         buffers = []
         for i, n in enumerate(lengths):
-            raw = _recv_exactly(sock, _BUF_LEN.size, deadline, f"length of buffer {i}")
+            raw = _recv_exactly(sock, _BUF_LEN.size, deadline, f"length of buffer {i}", waited)
             (announced,) = _BUF_LEN.unpack(raw)
             if announced != n:
                 raise ProtocolError(
                     f"buffer {i} is {n} bytes in the header but {announced} in its prefix"
                 )
-            buffers.append(_recv_exactly(sock, n, deadline, f"buffer {i}"))
+            buffers.append(_recv_exactly(sock, n, deadline, f"buffer {i}", waited))
         return tree, buffers
     finally:
-        if deadline is not None:
+        if waited[0]:
             sock.settimeout(previous)
 
 
@@ -946,12 +951,25 @@ def recv_message(
     return decode(tree, buffers, max_depth=max_depth, max_items=max_items)
 
 
-def _recv_exactly(sock: socket.socket, n: int, deadline: float | None, what: str) -> bytearray:
+def _recv_exactly(sock: socket.socket, n: int, deadline: float | None, what: str,
+                  waited: list[bool]) -> bytearray:
     buf = bytearray(n)
     view = memoryview(buf)
     got = 0
+    if deadline is not None and n and not waited[0]:
+        # The peer writes a frame with one send, so its bytes are usually here already:
+        # take them without a deadline. Setting the socket's timeout for the read (one
+        # ioctl each way, and a poll before every read) cost more than the read itself.
+        try:
+            got = sock.recv_into(view, n, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            got = 0
+        else:
+            if got == 0:
+                raise EOFError(f"connection closed after 0 of {n} bytes of the {what}")
     while got < n:
         if deadline is not None:
+            waited[0] = True
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise TimeoutError(f"timed out waiting for the {what} ({got} of {n} bytes read)")

@@ -31,7 +31,7 @@ from typing import Any, Callable, NamedTuple, Sequence
 
 import numpy as np
 
-from autograder import cgroups, protocol
+from autograder import affinity, cgroups, protocol
 from autograder.cputime import CpuClock
 from autograder.errors import (
     AutograderError,
@@ -64,6 +64,8 @@ WALL_FACTOR = 4.0
 WALL_SLACK = 15.0
 #: shortest wait between two readings of the CPU clock while a call runs
 MIN_POLL = 0.05
+#: cores this machine has: how fast a child's CPU time can grow against wall time
+_CORES = os.cpu_count() or 1
 
 
 def wall_backstop(cpu_limit: float) -> float:
@@ -207,6 +209,12 @@ class WorkerSlot:
     def __init__(self, *, slot: int = 0, python: str = sys.executable,
                  scratch: Path | None = None) -> None:
         self.slot, self._lock = claim_slot(slot)
+        try:
+            #: the core the warm parent and its children run on (see autograder.affinity)
+            self.core = affinity.slot_core(self.slot)
+        except BaseException:  # a bad AUTOGRADER_PIN_CORES: the slot is not kept
+            os.close(self._lock)
+            raise
         self._python = python
         self._proc: subprocess.Popen[bytes] | None = None
         self._control: socket.socket | None = None
@@ -247,6 +255,7 @@ class WorkerSlot:
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
         )
         theirs.close()
+        affinity.pin_process(self._proc.pid, self.core)  # before it starts any thread
         self._control = ours
         self._greeted = False
 
@@ -849,13 +858,17 @@ class StudentSession:
             raise EOFError("no worker")
         used = 0.0
         while True:
-            # The backstop is pushed back by the time the child sat waiting for a CPU,
-            # so a loaded machine does not make computing code look like waiting code.
-            wall_left = wall_deadline + self._clock.queued() - time.monotonic()
+            # CPU time cannot grow faster than wall time times the cores the child may use.
+            cpu_wait = max(MIN_POLL, (cpu_limit - used) / _CORES)
+            wall_left = wall_deadline - time.monotonic()
+            if wall_left < cpu_wait + 1.0:
+                # The backstop is pushed back by the time the child sat waiting for a CPU,
+                # so a loaded machine does not make computing code look like waiting code.
+                # Read only near the backstop: until then the wait below is cpu_wait.
+                wall_left += self._clock.queued()
             if used >= cpu_limit or wall_left <= 0:
                 raise TimeoutError
-            # CPU time cannot grow faster than wall time times the cores the child may use.
-            wait = min(wall_left, max(MIN_POLL, (cpu_limit - used) / (os.cpu_count() or 1)))
+            wait = min(wall_left, cpu_wait)
             readable, _, _ = select.select([self._sock], [], [], wait)
             if readable:
                 # A frame has started: the child may still stall inside it, so the
@@ -873,6 +886,8 @@ class StudentSession:
             # Forgotten once killed: a later _kill (the next spawn, close) must not
             # signal a number the warm parent has reaped and the kernel may reuse.
             self._pid = self._pidfd = None
+        if self._clock is not None:
+            self._clock.close()
         if self._sock is not None:
             self._sock.close()
             self._sock = None

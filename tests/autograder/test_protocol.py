@@ -755,6 +755,44 @@ def test_timeout_is_a_deadline_for_the_whole_frame(pair):
     join()
 
 
+
+class _CountingSocket(socket.socket):
+    """A socket that counts the changes of its timeout (each one is a system call)."""
+
+    changes = 0
+
+    def settimeout(self, value: float | None) -> None:
+        type(self).changes += 1
+        super().settimeout(value)
+
+
+def test_a_frame_that_is_there_is_read_without_touching_the_socket_mode(pair):
+    a, b = pair
+    counted = _CountingSocket(fileno=b.detach())
+    try:
+        _CountingSocket.changes = 0
+        value = {"args": [np.arange(6.0).reshape(3, 2)], "name": "hull"}
+        send_message(a, value)
+        assert_same(recv_message(counted, timeout=5), value)
+        assert _CountingSocket.changes == 0 and counted.gettimeout() is None
+        # A frame that arrives in pieces waits with the deadline, then the mode is put back.
+        frame = raw_frame(json.dumps({"v": [1], "bufs": []}))
+        a.sendall(frame[:3])
+        join = send_in_thread(lambda: (time.sleep(0.1), a.sendall(frame[3:])))
+        assert recv_message(counted, timeout=5) == [1]
+        join()
+        assert _CountingSocket.changes >= 2 and counted.gettimeout() is None
+        # A socket with a timeout of its own keeps it, and a missing frame still times out.
+        counted.settimeout(7.0)
+        send_message(a, value)
+        assert_same(recv_message(counted, timeout=5), value)
+        assert counted.gettimeout() == 7.0
+        with pytest.raises(TimeoutError):
+            recv_message(counted, timeout=0.2)
+        assert counted.gettimeout() == 7.0
+    finally:
+        counted.close()
+
 BAD_FRAMES = {
     "nan-literal": (raw_frame('{"v": [NaN], "bufs": []}'), "NaN"),
     "infinity-literal": (raw_frame('{"v": -Infinity, "bufs": []}'), "Infinity"),

@@ -1,0 +1,178 @@
+"""What one call of a student's function costs across the process boundary, and how many a
+submission makes.
+
+Usage: ``python benchmarks/call_costs.py [--calls 2000] [--repeat 3] [--no-hull]``.
+
+The checks call the student's functions in the sandboxed worker; each call is a
+round trip (the arguments framed as JSON and raw array bytes, the answer framed
+back, the child's CPU clock read around it). This prints, in one run, the CPU
+microseconds per call on each side (grader + worker), for a few kinds of
+arguments, with the slot on one core as the engine runs it (see
+:mod:`autograder.affinity`) and with ``AUTOGRADER_PIN_CORES=0``, against two
+peers that run in this process:
+
+* **direct**: the same function called directly (what the bare floor pays);
+* **framed in process**: the same message and answer encoded and decoded with
+  :mod:`autograder.protocol`, without a second process (what the framing costs
+  without the system calls, the wake-ups and the clock).
+
+With the hull assignment (unless ``--no-hull``) it also grades its examples once
+each with one :class:`~autograder.grading.Grader` and counts the calls per
+submission, so the boundary's share of a hull submission can be read off:
+calls per submission times the cost per call. CPU of the worker is the child's
+own (``/proc/<pid>/stat``, in clock ticks: use many calls). Not a test: nothing
+is asserted about speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
+
+import numpy as np  # noqa: E402
+
+from autograder import affinity, protocol  # noqa: E402
+from autograder.cputime import process_cpu_seconds  # noqa: E402
+from autograder.proxy import CallLog, Student  # noqa: E402
+from autograder.sandbox import IsolationPolicy  # noqa: E402
+from autograder.session import StudentSession, WorkerSlot  # noqa: E402
+
+NOTEBOOK = '''
+import numpy as np
+
+def same(x):
+    return x
+'''
+
+#: argument kinds: a scalar, a hull-sized point set, a large point set
+ARGUMENTS: dict[str, Callable[[], Any]] = {
+    "scalar": lambda: 0.5,
+    "20 points (20x2 float)": lambda: np.random.default_rng(1).random((20, 2)),
+    "2,000 points (2000x2 float)": lambda: np.random.default_rng(1).random((2000, 2)),
+}
+
+
+def same(x: Any) -> Any:
+    return x
+
+
+def framed(value: Any) -> Any:
+    """The call's request and answer, encoded and decoded as the two processes do."""
+    tree, buffers = protocol.encode({"op": "call", "name": "same", "args": [value], "kwargs": {},
+                                     "figures": False})
+    request = protocol.decode(tree, [bytearray(b) for b in buffers])
+    assert isinstance(request, dict)
+    tree, buffers = protocol.encode({"ok": True, "value": same(*request["args"]), "stdout": ""})
+    answer = protocol.decode(tree, [bytearray(b) for b in buffers])
+    assert isinstance(answer, dict)
+    return answer["value"]
+
+
+def per_call(calls: int, repeat: int, run: Callable[[], Any],
+             child: int | None = None) -> tuple[float, float]:
+    """Best (this process, child) CPU microseconds per call over ``repeat`` runs."""
+    best = (float("inf"), float("inf"))
+    for _ in range(repeat):
+        cpu = time.process_time()
+        worker = process_cpu_seconds(child) if child else 0.0
+        for _ in range(calls):
+            run()
+        mine = (time.process_time() - cpu) / calls * 1e6
+        theirs = ((process_cpu_seconds(child) - worker) / calls * 1e6) if child else 0.0
+        best = min(best, (mine, theirs), key=sum)
+    return best
+
+
+def measure(args: argparse.Namespace, pinned: bool) -> dict[str, tuple[float, float]]:
+    """(grader, worker) CPU microseconds per call for each argument kind, with the slot
+    on one core as the engine runs it, or with ``AUTOGRADER_PIN_CORES=0``."""
+    os.environ[affinity.ENVIRONMENT_VARIABLE] = "1" if pinned else "0"
+    found: dict[str, tuple[float, float]] = {}
+    with WorkerSlot() as slot, affinity.on_core(slot.core):
+        session = StudentSession(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
+                                 policy=IsolationPolicy(), notebook_timeout=60)
+        session.start()
+        student = Student(session, timeout=120, functions=session.report.functions,
+                          forbidden={}, log=CallLog())
+        child = session._pid  # the child answering the calls
+        try:
+            for label, make in ARGUMENTS.items():
+                value = make()
+                found[label] = per_call(args.calls, args.repeat, lambda: student.same(value),
+                                        child)
+        finally:
+            session.close()
+    return found
+
+
+def boundary(args: argparse.Namespace) -> None:
+    setting = os.environ.get(affinity.ENVIRONMENT_VARIABLE)
+    try:
+        pinned, unpinned = measure(args, True), measure(args, False)
+    finally:
+        if setting is None:
+            os.environ.pop(affinity.ENVIRONMENT_VARIABLE, None)
+        else:
+            os.environ[affinity.ENVIRONMENT_VARIABLE] = setting
+    print(f"CPU microseconds per call (best of {args.repeat} runs of {args.calls:,} calls); "
+          "grader + worker, the slot on one core (as the engine runs) and unpinned")
+    print(f"{'argument':<28} {'direct':>7} {'framed':>7} {'one core':>17} {'unpinned':>17}"
+          f" {'unpinned/one core':>18} {'one core/framed':>16}")
+    for label, make in ARGUMENTS.items():
+        value = make()
+        direct, _ = per_call(args.calls, args.repeat, lambda: same(value))
+        inproc, _ = per_call(args.calls, args.repeat, lambda: framed(value))
+        (g1, w1), (g2, w2) = pinned[label], unpinned[label]
+        print(f"{label:<28} {direct:>7.2f} {inproc:>7.1f}"
+              f" {g1:>5.0f}+{w1:>5.0f}={g1 + w1:>5.0f} {g2:>5.0f}+{w2:>5.0f}={g2 + w2:>5.0f}"
+              f" {(g2 + w2) / (g1 + w1):>17.2f}x {(g1 + w1) / inproc:>15.2f}x")
+
+
+def hull_calls() -> None:
+    """Calls per hull submission, every check and public checks only."""
+    from autograder.assignment import load_assignment
+    from autograder.grading import Grader, GradingOptions
+
+    hull = ROOT / "assignments" / "hull"
+    files = sorted((hull / "examples").glob("*.ipynb"))
+    counted = StudentSession.call
+    calls = [0]
+
+    def counting(self: StudentSession, *a: Any, **k: Any) -> Any:
+        calls[0] += 1
+        return counted(self, *a, **k)
+
+    StudentSession.call = counting  # type: ignore[method-assign]
+    try:
+        for public in (False, True):
+            with Grader(load_assignment(hull), GradingOptions(public_only=public)) as grader:
+                calls[0] = 0
+                for path in files:
+                    grader.grade(path)
+                label = "public checks" if public else "every check"
+                print(f"hull, {label}: {calls[0] / len(files):.1f} calls per submission "
+                      f"(over its {len(files)} examples)")
+    finally:
+        StudentSession.call = counted  # type: ignore[method-assign]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--calls", type=int, default=2000)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--no-hull", action="store_true", help="skip counting hull's calls")
+    args = parser.parse_args()
+    boundary(args)
+    if not args.no_hull:
+        hull_calls()
+
+
+if __name__ == "__main__":
+    main()
