@@ -52,6 +52,7 @@ from autograder.errors import NotebookError
 __all__ = [
     "Cell",
     "Notebook",
+    "parse_notebook",
     "read_notebook",
     "code_sources",
     "locked_sources",
@@ -187,7 +188,16 @@ def read_notebook(
         exception escapes for bad input.
     """
     path = Path(path)
-    raw = _read_bytes(path, max_bytes)
+    return parse_notebook(_read_bytes(path, max_bytes), path=path, max_code_bytes=max_code_bytes)
+
+
+def parse_notebook(raw: bytes, *, path: str | Path = "upload.ipynb",
+                   max_code_bytes: int = MAX_CODE_BYTES) -> Notebook:
+    """Read the bytes of a notebook file, as :func:`read_notebook` reads a file.
+
+    For a notebook that is not on disk (an upload being checked); ``path`` is only
+    recorded in the result. The caller bounds the size of ``raw``.
+    """
     text = _decode(raw)
     document = _parse_json(text)
     major = _check_version(document)
@@ -196,7 +206,7 @@ def read_notebook(
     _check_code_size(cells, max_code_bytes)
     language = _language(nb.get("metadata"))
     notes = _validation_warnings(nb)
-    return Notebook(path=path, cells=cells, nbformat=major, language=language,
+    return Notebook(path=Path(path), cells=cells, nbformat=major, language=language,
                     sha256=hashlib.sha256(raw).hexdigest(), warnings=notes)
 
 

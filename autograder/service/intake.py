@@ -8,14 +8,13 @@ from __future__ import annotations
 
 import datetime as dt
 import math
-import tempfile
 from pathlib import Path
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.errors import NotebookError, UploadRejected
-from autograder.notebook import read_notebook
+from autograder.notebook import parse_notebook
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
@@ -31,14 +30,11 @@ def check_notebook(data: bytes, max_bytes: int) -> None:
                              "(Kernel > Restart & Clear Output) and upload it again.", status=413)
     if not data.strip():
         raise UploadRejected("The file is empty; upload your .ipynb notebook.")
-    with tempfile.TemporaryDirectory(prefix="autograder-upload-") as folder:
-        path = Path(folder) / "upload.ipynb"
-        path.write_bytes(data)
-        try:
-            read_notebook(path, max_bytes=max_bytes)
-        except NotebookError as exc:
-            raise UploadRejected(f"This is not a notebook the grader can read: {exc}",
-                                 status=422) from None
+    try:
+        parse_notebook(data)
+    except NotebookError as exc:
+        raise UploadRejected(f"This is not a notebook the grader can read: {exc}",
+                             status=422) from None
 
 
 def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, user_id: str,

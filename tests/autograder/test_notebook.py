@@ -18,6 +18,7 @@ from autograder.notebook import (
     Cell,
     Notebook,
     code_sources,
+    parse_notebook,
     read_notebook,
 )
 from autograder.staticscan import scan
@@ -62,6 +63,9 @@ def test_problem_file_is_rejected_with_its_kind(name: str, kind: str) -> None:
     message = str(info.value)
     assert "Traceback" not in message and len(message) < 400
     assert any(word in message for word in ("submit", "Submit", "save")), message
+    with pytest.raises(NotebookError) as from_bytes:  # an upload's bytes: the same answer
+        parse_notebook((FILES / name).read_bytes())
+    assert from_bytes.value.kind == kind and str(from_bytes.value) == message
 
 
 @pytest.mark.parametrize("name", GRADED)
@@ -70,6 +74,10 @@ def test_problem_file_is_graded(name: str) -> None:
     assert isinstance(nb, Notebook) and nb.language == "python"
     assert nb.path == FILES / name
     assert len(nb.sha256) == 64
+    uploaded = parse_notebook((FILES / name).read_bytes(), path="upload.ipynb")
+    assert [(c.index, c.source) for c in uploaded.cells] == [(c.index, c.source) for c in nb.cells]
+    assert (uploaded.sha256, uploaded.warnings) == (nb.sha256, nb.warnings)
+    assert uploaded.path == Path("upload.ipynb")
 
 
 def test_not_json_gives_line_and_column() -> None:

@@ -7,8 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from autograder.errors import UsageError
+from autograder.errors import UploadRejected, UsageError
 from autograder.service.course import load_course
+from autograder.service.intake import check_notebook
+
+NOTEBOOKS = Path(__file__).resolve().parents[1] / "files" / "notebooks"
 
 BASE = """
 [course]
@@ -85,3 +88,17 @@ def test_trusted_header_only_when_configured_and_from_the_proxy(tmp_path: Path) 
     with TestClient(create_app(other, factory), follow_redirects=False) as client:
         assert client.get("/assignments", headers={"X-Remote-User": "alice"}).status_code == 303
     engine.dispose()
+
+
+def test_an_upload_is_checked_in_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Checking an upload writes nothing: a server stopped meanwhile leaves no file behind."""
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr("tempfile.tempdir", None)  # gettempdir() reads TMPDIR again
+    check_notebook((NOTEBOOKS / "magics.ipynb").read_bytes(), 10**6)
+    with pytest.raises(UploadRejected) as info:
+        check_notebook((NOTEBOOKS / "not-json.ipynb").read_bytes(), 10**6)
+    assert info.value.status == 422 and "not a notebook the grader can read" in str(info.value)
+    with pytest.raises(UploadRejected) as too_big:
+        check_notebook((NOTEBOOKS / "magics.ipynb").read_bytes(), 10)
+    assert too_big.value.status == 413
+    assert list(tmp_path.iterdir()) == []
