@@ -8,7 +8,6 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import nbformat
 import pytest
 
 from autograder import affinity
@@ -16,6 +15,7 @@ from autograder.assignment import load_assignment
 from autograder.errors import UsageError
 from autograder.grading import Grader
 from autograder.session import StudentSession
+from tests.support.assignments import RIGHT, submission, write_double
 
 CORES = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
 needs_two_cores = pytest.mark.skipif(
@@ -31,22 +31,8 @@ def cores_of(pid: int) -> set[int]:
 
 
 def write_assignment(root: Path) -> tuple[Path, Path]:
-    folder = root / "double"
-    (folder / "checks" / "public").mkdir(parents=True)
-    (folder / "checks" / "hidden").mkdir(parents=True)
-    (folder / "assignment.toml").write_text(
-        '[assignment]\nname = "double"\ntitle = "Double it"\nnotebook = "double.ipynb"\n')
-    cell = nbformat.v4.new_code_cell(
-        "### BEGIN SOLUTION\ndef double(x):\n    return 2 * x\n### END SOLUTION",
-        metadata={"nbgrader": {"grade_id": "double", "solution": True, "grade": False,
-                               "locked": False, "schema_version": 3}})
-    nbformat.write(nbformat.v4.new_notebook(cells=[cell]), folder / "double.ipynb")
-    (folder / "checks" / "public" / "test_double.py").write_text(CHECK)
-    submission = root / "submitted" / "s1.ipynb"
-    submission.parent.mkdir()
-    nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(
-        "def double(x):\n    return 2 * x\n")]), submission)
-    return folder, submission
+    folder = write_double(root, "double", {"test_double.py": CHECK})
+    return folder, submission(root / "submitted", "s1", RIGHT)
 
 
 def test_slots_spread_over_the_cores_this_process_may_use(monkeypatch: pytest.MonkeyPatch) -> None:

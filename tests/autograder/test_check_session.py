@@ -12,13 +12,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Iterator
 
-import nbformat
 import pytest
 
 from autograder.assignment import load_assignment
 from autograder.errors import AssignmentError, EngineError
 from autograder.grading import Grader
 from autograder.results import SubmissionResult
+from tests.support.assignments import RIGHT, submission, write_double
 
 HELPER = '''
 REMEMBERED = []  # a helper module's global, appended to by the checks
@@ -74,31 +74,11 @@ def test_parameter_changed_in_place(student, values):
     assert values == [1, 2, 2], f"values {values}"
 '''
 
-RIGHT = "def double(x):\n    return 2 * x\n"
 WRONG = "def double(x):\n    return 3 * x\n"
 
 
 def write_assignment(root: Path, name: str, checks: str = CHECKS) -> Path:
-    folder = root / name
-    (folder / "checks" / "public").mkdir(parents=True)
-    (folder / "checks" / "hidden").mkdir(parents=True)
-    (folder / "assignment.toml").write_text(
-        f'[assignment]\nname = "{name}"\ntitle = "Double it"\nnotebook = "{name}.ipynb"\n')
-    cell = nbformat.v4.new_code_cell(
-        "### BEGIN SOLUTION\n" + RIGHT + "### END SOLUTION",
-        metadata={"nbgrader": {"grade_id": "double", "solution": True, "grade": False,
-                               "locked": False, "schema_version": 3}})
-    nbformat.write(nbformat.v4.new_notebook(cells=[cell]), folder / f"{name}.ipynb")
-    (folder / "checks" / "public" / "stateful_helper.py").write_text(HELPER)
-    (folder / "checks" / "public" / "test_double.py").write_text(checks)
-    return folder
-
-
-def submission(folder: Path, name: str, code: str) -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{name}.ipynb"
-    nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(code)]), path)
-    return path
+    return write_double(root, name, {"stateful_helper.py": HELPER, "test_double.py": checks})
 
 
 def verdicts(result: SubmissionResult) -> list[tuple[str, float, float, str, str]]:
