@@ -19,7 +19,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
-__all__ = ["CpuClock", "process_cpu_seconds", "queued_seconds", "session_cpu_seconds"]
+__all__ = ["CpuClock", "process_cpu_seconds", "session_cpu_seconds"]
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -46,6 +46,7 @@ def _cpu_of(fields: list[str] | None) -> float:
 
 
 def _queued_of(raw: bytes | None) -> float:
+    """Run-queue wait of a main thread from its ``/proc/<pid>/schedstat`` (field 2); 0.0 if unknown."""
     try:
         return int(raw.split()[1]) / 1e9 if raw is not None else 0.0
     except (IndexError, ValueError):
@@ -55,15 +56,6 @@ def _queued_of(raw: bytes | None) -> float:
 def process_cpu_seconds(pid: int) -> float:
     """User + system time of ``pid`` and its reaped children; 0.0 when it is gone."""
     return _cpu_of(_stat_fields(pid))
-
-
-def queued_seconds(pid: int) -> float:
-    """Run-queue wait of ``pid``'s main thread (``/proc/<pid>/schedstat``, field 2); 0.0 if unknown."""
-    try:
-        with open(f"/proc/{pid}/schedstat", "rb") as handle:
-            return _queued_of(handle.read())
-    except OSError:
-        return 0.0
 
 
 class _ProcFile:

@@ -447,7 +447,7 @@ def prime_caches() -> None:
 
     The warm parent calls it while it starts, so its first submission does not pay
     for listing the installed distributions and walking the readable roots (about
-    half a second); what depends on a request's exclusions is computed at its first
+    0.3 s of CPU); what depends on a request's exclusions is computed at its first
     spawn.
     """
     _hidden_installed_paths()
