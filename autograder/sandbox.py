@@ -482,7 +482,7 @@ def _candidate_roots(extra: Sequence[Path]) -> list[Path]:
     on_path = [Path(entry) for entry in sys.path if entry and os.path.isabs(entry)]
     site_dirs = [path for path in on_path
                  if path.name in ("site-packages", "dist-packages")
-                 or any(_inside(_resolve(path), {root}) for root in installs)]
+                 or any(_within(_resolve(path), root) for root in installs)]
     return [_resolve(p) for p in [*installs, *_site_packages_dirs(), *site_dirs,
                                   *SYSTEM_READ_ROOTS, *extra]]
 
@@ -497,7 +497,7 @@ def _allowed_beneath(root: Path, holes: set[Path], seen: set[Path]) -> Iterator[
     if root in seen or root in holes:
         return
     seen.add(root)
-    inner = {hole for hole in holes if root in hole.parents}
+    inner = {hole for hole in holes if hole != root and _within(hole, root)}
     if not inner:
         yield root
         return
@@ -512,17 +512,28 @@ def _allowed_beneath(root: Path, holes: set[Path], seen: set[Path]) -> Iterator[
             yield from _allowed_beneath(entry, inner, seen)
 
 
-def _inside(path: Path, roots: set[Path]) -> bool:
-    """Whether ``path`` is one of ``roots`` or lies beneath one of them."""
-    return path in roots or not roots.isdisjoint(path.parents)
+def _within(path: Path, root: Path) -> bool:
+    """Whether ``path`` is ``root`` or lies beneath it, comparing components.
+
+    The same answer as ``path == root or root in path.parents`` (or
+    ``path.is_relative_to(root)``) for the absolute, resolved paths used here,
+    without building a ``Path`` per parent or raising per miss: the warm parent
+    asks this about 10^5 times when it lists the readable paths, on the way to its
+    first child (measured: 0.28 s of CPU with ``parents``, 0.05 s like this).
+    """
+    prefix = root.parts
+    return path.parts[:len(prefix)] == prefix
 
 
 def _outermost(paths: Sequence[Path]) -> list[Path]:
     """Drop duplicates and paths that lie inside another path of the list."""
-    kept: set[Path] = set()
+    kept: list[Path] = []
+    kept_parts: set[tuple[str, ...]] = set()
     for path in sorted(set(paths), key=lambda p: len(p.parts)):
-        if not _inside(path, kept):
-            kept.add(path)
+        parts = path.parts
+        if not any(parts[:end] in kept_parts for end in range(1, len(parts) + 1)):
+            kept.append(path)
+            kept_parts.add(parts)
     return sorted(kept)
 
 
@@ -552,9 +563,33 @@ def _package_dirs(name: str) -> list[str]:
 
 
 def _distribution_names(packages: Sequence[str]) -> set[str]:
-    """Normalised names of the distributions that install ``packages``."""
-    owners = importlib.metadata.packages_distributions()
-    return {_normalise(dist) for pkg in packages for dist in owners.get(pkg, [])}
+    """Normalised names of the distributions that install ``packages``.
+
+    A distribution installs a package when its ``top_level.txt`` names it or,
+    without that file, when a ``.py`` file it lists lies in the package's folder
+    or is the module itself: what ``importlib.metadata.packages_distributions()``
+    answers on Python 3.11, without its price. That parses the file list of every
+    distribution without ``top_level.txt`` (0.13 s of CPU with 200 installed, on
+    the warm parent's way to its first child); a list that does not even contain
+    a package's name cannot place a file in it, so only the others are parsed.
+    """
+    wanted = set(packages)
+    names: set[str] = set()
+    for dist in importlib.metadata.distributions():
+        declared = (dist.read_text("top_level.txt") or "").split()
+        if declared:
+            tops = set(declared)
+        elif any(name in (dist.read_text(listing) or "")
+                 for listing in ("RECORD", "installed-files.txt", "SOURCES.txt")
+                 for name in wanted):
+            tops = {f.parts[0] if len(f.parts) > 1 else f.with_suffix("").name
+                    for f in dist.files or () if f.suffix == ".py"}
+        else:
+            continue
+        name = dist.metadata["Name"]
+        if tops & wanted and name:
+            names.add(_normalise(name))
+    return names
 
 
 def _is_install_record(entry: str, dists: set[str]) -> bool:
@@ -694,7 +729,7 @@ def _coverable_for(exclude: tuple[str, ...], workdir: str,
     work = _resolve(workdir)
     found: list[Path] = []
     for folder in _coverable(exclude, allowed):
-        if not work.is_relative_to(folder) and not any(folder.is_relative_to(f) for f in found):
+        if not _within(work, folder) and not any(_within(folder, f) for f in found):
             found.append(folder)
     return tuple(found)
 
@@ -708,8 +743,8 @@ def _coverable(exclude: tuple[str, ...], allowed: tuple[str, ...]) -> tuple[Path
     return tuple(
         folder for folder in sorted({_resolve(p) for p in exclude}, key=lambda p: len(p.parts))
         if folder.is_dir() and folder != Path("/")
-        and not any(folder.is_relative_to(root) for root in whole)
-        and not any(path.is_relative_to(folder) for path in needed))
+        and not any(_within(folder, root) for root in whole)
+        and not any(_within(path, folder) for path in needed))
 
 
 def _join_cgroup(policy: IsolationPolicy, slot: int, notes: list[str]) -> None:

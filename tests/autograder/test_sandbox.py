@@ -9,6 +9,8 @@ child's process group, so no case can hang the suite.
 from __future__ import annotations
 
 import errno
+import importlib.metadata
+import importlib.util
 import json
 import os
 import signal
@@ -24,6 +26,7 @@ from typing import Any
 
 import pytest
 
+from autograder import sandbox
 from autograder.errors import UsageError
 from autograder.sandbox import (
     IsolationPolicy,
@@ -272,6 +275,36 @@ def test_readable_paths_leave_out_the_repository_and_install_records() -> None:
         assert not (path.name.startswith("numgrade") and path.name.endswith(".dist-info")), path
         assert path != Path("/etc/shadow")
     assert any(Path(sys.base_prefix).resolve() in [p, *p.parents] for p in paths)
+
+
+def test_owners_of_the_hidden_packages_are_those_importlib_metadata_names() -> None:
+    """The cheap lookup of who installs a package answers as packages_distributions()."""
+    owners = importlib.metadata.packages_distributions()
+
+    def expected(packages: Sequence[str]) -> set[str]:
+        return {sandbox._normalise(d) for p in packages for d in owners.get(p, []) if d}
+
+    importable = sorted(name for name in owners if name.isidentifier()
+                        and importlib.util.find_spec(name) is not None)
+    assert {"autograder", "numpy", "pytest"} <= set(importable)
+    for package in [*sandbox.HIDDEN_PACKAGES, "numpy", "scipy", "IPython", "pytest", "_pytest",
+                    "matplotlib", "mpl_toolkits", "nbformat", "six", "not_installed_at_all"]:
+        assert sandbox._distribution_names([package]) == expected([package]), package
+    assert sandbox._distribution_names(importable) == expected(importable)
+    assert sandbox._distribution_names(sandbox.HIDDEN_PACKAGES) >= {"numgrade"}
+
+
+def test_path_containment_by_components_is_pathlibs() -> None:
+    """``_within`` and ``_outermost`` compare components; the answers are pathlib's."""
+    paths = [Path(p) for p in ("/", "/a", "/a/b", "/a/bc", "/a/b/c", "/ab", "/a/b/c/d",
+                                "/x/a/b", "/a/b/c.d")]
+    for path in paths:
+        for root in paths:
+            assert sandbox._within(path, root) == (path == root or root in path.parents), \
+                (path, root)
+    assert sandbox._outermost([*paths[1:], Path("/a/b"), Path("/x/a/b")]) == [
+        Path("/a"), Path("/ab"), Path("/x/a/b")]
+    assert sandbox._outermost(paths) == [Path("/")]
 
 
 def test_probe_support_is_cached_and_consistent() -> None:
