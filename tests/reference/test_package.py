@@ -103,3 +103,19 @@ def test_doctests(name):
     module = reference if name == "__init__" else importlib.import_module(f"reference.{name}")
     result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.failed == 0
+
+
+def test_importing_the_package_loads_neither_matplotlib_nor_scipy():
+    """A grader imports ``reference`` for its checks at every start: the figures'
+    matplotlib and the scipy modules a few functions use are loaded on first use."""
+    import subprocess
+    import sys
+
+    code = ("import sys, reference\n"
+            "heavy = ['matplotlib', 'scipy.linalg', 'scipy.special', 'scipy.spatial']\n"
+            "print([m for m in heavy if m in sys.modules])\n"
+            "from reference import plot_car\n"
+            "print('matplotlib' in sys.modules, 'plot_car' in dir(reference))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=True)
+    assert done.stdout.split("\n")[:2] == ["[]", "True True"], done.stdout + done.stderr
