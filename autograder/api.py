@@ -13,6 +13,7 @@ from autograder.batch import BatchReport, Shard, error_result, grade_batch
 from autograder.grading import Grader, GradingOptions
 from autograder.release import release as _release
 from autograder.results import SubmissionResult
+from autograder.session import WorkerSlot
 
 if TYPE_CHECKING:
     from autograder.shards import MergeReport
@@ -34,19 +35,22 @@ def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, o
           progress: bool | None = None,
           on_result: Callable[[SubmissionResult], None] | None = None,
           junit: Path | None = None, dask: DaskSpec | str | None = None,
-          shard: Shard | str | None = None) -> BatchReport:
+          shard: Shard | str | None = None, worker: WorkerSlot | None = None) -> BatchReport:
     """Grade notebooks (files or folders) into ``out``; see :func:`autograder.batch.grade_batch`.
 
     ``junit``, when given, is a file for the JUnit XML report of every result in
     ``out``. ``dask`` (a :class:`DaskSpec`, or an address such as ``"local:2"``)
     grades on a Dask cluster instead of ``jobs`` local processes; ``shard``
-    (``"K/N"``) grades only that share of the submissions.
+    (``"K/N"``) grades only that share of the submissions. ``worker``, a slot from
+    :func:`autograder.session.start_early`, is the first local slot; the caller closes
+    it after the call (the command line starts it before importing the engine).
     """
     found = resolve_assignment(assignment)
     report = grade_batch(found, [Path(s) for s in submissions], Path(out),
                          jobs=jobs, options=options, progress=progress, on_result=on_result,
                          dask=DaskSpec(dask) if isinstance(dask, str) else dask,
-                         shard=Shard.parse(shard) if isinstance(shard, str) else shard)
+                         shard=Shard.parse(shard) if isinstance(shard, str) else shard,
+                         worker=worker)
     if junit is not None:
         exports.write_junit(Path(junit), report.folder, name=found.name)
     return report
@@ -147,15 +151,19 @@ def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
 
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
-          options: GradingOptions | None = None) -> SubmissionResult:
-    """Run the public checks on one notebook, as a student does before submitting."""
+          options: GradingOptions | None = None,
+          worker: WorkerSlot | None = None) -> SubmissionResult:
+    """Run the public checks on one notebook, as a student does before submitting.
+
+    ``worker``: as for :func:`grade`.
+    """
     notebook = Path(notebook)
     found = resolve_assignment(assignment) if assignment is not None else _guess(notebook)
     base = options or GradingOptions()
     opts = GradingOptions(policy=base.policy, notebook_timeout=base.notebook_timeout,
                           call_timeout=base.call_timeout, public_only=True,
                           max_notebook_bytes=base.max_notebook_bytes)
-    with Grader(found, opts) as grader:
+    with Grader(found, opts, worker=worker) as grader:
         return grader.grade(notebook)
 
 

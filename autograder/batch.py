@@ -28,6 +28,7 @@ from autograder.feedback import FEEDBACK_NAME, write_feedback
 from autograder.grading import Grader, GradingOptions, submission_key, _file_sha256
 from autograder.report import RESULTS_NAME, read_result, write_grades, write_result
 from autograder.results import SubmissionResult
+from autograder.session import WorkerSlot
 from autograder.summary import write_summary
 
 #: files and folders the batch itself writes at the top of a results folder; never ids
@@ -263,14 +264,16 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
                 jobs: int | None = None, options: GradingOptions | None = None,
                 progress: bool | None = None,
                 on_result: Callable[[SubmissionResult], None] | None = None,
-                dask: DaskSpec | None = None, shard: Shard | None = None) -> BatchReport:
+                dask: DaskSpec | None = None, shard: Shard | None = None,
+                worker: WorkerSlot | None = None) -> BatchReport:
     """Grade every submission into ``out_dir``, reusing results whose key is unchanged.
 
     Writes ``<id>/results.json`` and ``<id>/feedback.html`` as each submission
     finishes, then ``grades.csv``, ``summary.json`` and ``summary.html`` from
     every result in ``out_dir`` (earlier runs' included). ``dask`` sends the
     gradings to a Dask cluster instead of the local pool of ``jobs`` processes;
-    ``shard`` keeps only the submissions of that shard.
+    ``shard`` keeps only the submissions of that shard. ``worker``, a slot started
+    ahead, becomes the local pool's slot 0 (its owner closes it if nothing is graded).
     """
     start = time.perf_counter()
     if dask is not None and jobs is not None:
@@ -309,7 +312,8 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
 
     try:
         if todo:
-            make_backend(jobs=jobs, dask=dask).run(assignment, options, todo, out_dir, finished)
+            make_backend(jobs=jobs, dask=dask, worker=worker).run(assignment, options, todo,
+                                                                  out_dir, finished)
     finally:
         bar.close()
     missing = [job for job in todo if job.id not in done]

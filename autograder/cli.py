@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Iterator, Sequence
 
 import autograder
 from autograder.errors import AutograderError, UsageError
@@ -18,6 +19,7 @@ if TYPE_CHECKING:
     from autograder.backends import DaskSpec, TLSFiles
     from autograder.grading import GradingOptions
     from autograder.results import SubmissionResult
+    from autograder.session import WorkerSlot
 
 
 def _positive_int(text: str) -> int:
@@ -225,17 +227,33 @@ def _options(args: argparse.Namespace) -> GradingOptions:
                           public_only=getattr(args, "public_only", False))
 
 
-def _grade(args: argparse.Namespace) -> int:
-    from autograder import api
+@contextlib.contextmanager
+def _worker_started_early(wanted: bool) -> Iterator[WorkerSlot | None]:
+    """A warm parent started before the engine's imports (see ``session.start_early``)."""
+    if not wanted:
+        yield None
+        return
+    from autograder.session import start_early
 
-    quiet = args.no_progress or args.ci
-    if args.dask is None and not quiet and sys.stderr.isatty():  # beside the progress bar
-        print(f"autograder: starting up to {args.jobs or os.cpu_count() or 1} grading worker(s); "
-              "the first results follow once they are warm...", file=sys.stderr)
-    report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
-                       options=_options(args), progress=False if quiet else None,
-                       dask=_dask(args), shard=args.shard,
-                       junit=args.junit)
+    worker = start_early()
+    try:
+        yield worker
+    finally:
+        worker.shutdown()
+
+
+def _grade(args: argparse.Namespace) -> int:
+    with _worker_started_early(args.dask is None) as worker:
+        from autograder import api
+
+        quiet = args.no_progress or args.ci
+        if args.dask is None and not quiet and sys.stderr.isatty():  # beside the progress bar
+            print(f"autograder: starting up to {args.jobs or os.cpu_count() or 1} grading "
+                  "worker(s); the first results follow once they are warm...", file=sys.stderr)
+        report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
+                           options=_options(args), progress=False if quiet else None,
+                           dask=_dask(args), shard=args.shard,
+                           junit=args.junit, worker=worker)
     if args.ci:
         summary_file = os.environ.get("GITHUB_STEP_SUMMARY") or None
         for line in api.ci_report(report, step_summary=Path(summary_file) if summary_file else None):
@@ -277,9 +295,11 @@ def format_check(result: SubmissionResult) -> str:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from autograder import api
+    with _worker_started_early(True) as worker:
+        from autograder import api
 
-    result = api.check(args.notebook, assignment=args.assignment, options=_options(args))
+        result = api.check(args.notebook, assignment=args.assignment, options=_options(args),
+                           worker=worker)
     print(format_check(result))
     return 0 if result.score >= result.max_score else 1
 

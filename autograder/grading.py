@@ -161,7 +161,11 @@ class Grader:
     """Grades submissions of one assignment, one at a time, on one warm worker slot."""
 
     def __init__(self, assignment: Assignment, options: GradingOptions | None = None,
-                 *, slot: int = 0, scratch: Path | None = None) -> None:
+                 *, slot: int = 0, scratch: Path | None = None,
+                 worker: WorkerSlot | None = None) -> None:
+        """``worker``: a slot whose warm parent was started ahead (see
+        :func:`autograder.session.start_early`), used instead of claiming ``slot``;
+        the grader closes it with itself."""
         self.assignment = assignment
         self.options = options or GradingOptions()
         self.policy = policy_for(assignment, self.options)
@@ -170,7 +174,7 @@ class Grader:
         #: assignment digest they were collected at (a new session when it changes)
         self._checks: CheckSession | None = None
         self._checks_digest = ""
-        self._slot = WorkerSlot(slot=slot, scratch=scratch)
+        self._slot = worker if worker is not None else WorkerSlot(slot=slot, scratch=scratch)
 
     def __enter__(self) -> "Grader":
         return self

@@ -335,6 +335,25 @@ class WorkerSlot:
         self.shutdown()
 
 
+def start_early(*, slot: int = 0) -> WorkerSlot:
+    """A slot whose warm parent starts now, before the caller imports the rest of the engine.
+
+    The warm parent imports numpy, scipy, matplotlib and IPython (about a second of
+    CPU) and comes before the first result; started here, it imports beside the
+    caller's own imports and check collection instead of after them (0.2 s sooner
+    to the first result on 2 cores). The command line's ``grade`` and ``check``
+    call this first thing. The caller owns the slot: it hands it to
+    :class:`~autograder.grading.Grader` (``worker=``) and calls
+    :meth:`WorkerSlot.shutdown` in the end (safe after the grader closed it too).
+    """
+    worker = WorkerSlot(slot=slot)
+    try:
+        worker.start(wait=False)
+    except OSError:  # it is started again when needed, and what failed is reported there
+        pass
+    return worker
+
+
 def child_pidfd(pid: int, parent: int | None) -> int | None:
     """A pidfd of the child ``pid`` that the warm parent ``parent`` just forked, or None.
 

@@ -24,6 +24,7 @@ from autograder.assignment import Assignment
 from autograder.errors import UsageError
 from autograder.grading import GradingOptions
 from autograder.results import SubmissionResult
+from autograder.session import WorkerSlot
 
 
 @dataclass(frozen=True)
@@ -145,13 +146,17 @@ def load_dask_backend() -> ModuleType:
     return dask_cluster
 
 
-def make_backend(*, jobs: int | None = None, dask: DaskSpec | None = None) -> Backend:
-    """The local pool, or the Dask backend when ``dask`` is given (imports ``distributed``)."""
+def make_backend(*, jobs: int | None = None, dask: DaskSpec | None = None,
+                 worker: WorkerSlot | None = None) -> Backend:
+    """The local pool, or the Dask backend when ``dask`` is given (imports ``distributed``).
+
+    ``worker``, a slot started ahead, becomes the local pool's slot 0.
+    """
     if dask is not None:
         return load_dask_backend().DaskBackend(dask)
     from autograder.backends.local import LocalBackend
 
-    return LocalBackend(jobs)
+    return LocalBackend(jobs, worker=worker)
 
 
 __all__ = ["Backend", "DaskSpec", "Finished", "Job", "TLSFiles", "check_address",

@@ -30,6 +30,7 @@ from autograder.batch import error_result, grade_one, store_error
 from autograder.grading import Grader, GradingOptions
 from autograder.results import SubmissionResult
 from autograder.sandbox import probe_support
+from autograder.session import WorkerSlot
 
 # One Grader per pool process: the warm worker is the point of the pool. This is the
 # package's only module-level state, and it lives only in pool processes.
@@ -59,16 +60,20 @@ def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
 
 
 class LocalBackend:
-    """``jobs`` slots (default: the number of cores); slot 0 runs in this process."""
+    """``jobs`` slots (default: the number of cores); slot 0 runs in this process.
 
-    def __init__(self, jobs: int | None = None) -> None:
+    ``worker``, a slot whose warm parent was started ahead, is slot 0's.
+    """
+
+    def __init__(self, jobs: int | None = None, *, worker: WorkerSlot | None = None) -> None:
         self.jobs = jobs
+        self.worker = worker
 
     def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
             out_dir: Path, finished: Finished) -> None:
         slots = max(1, min(self.jobs or os.cpu_count() or 1, len(jobs) or 1))
         queue = _Queue(jobs)
-        with Grader(assignment, options) as grader:
+        with Grader(assignment, options, worker=self.worker) as grader:
             grader.prepare()
             if slots == 1:
                 while (job := queue.take()) is not None:

@@ -7,12 +7,15 @@ machine may be busy); ``benchmarks/engine_vs_peers.py`` prints the times.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 import autograder
+from tests.support.assignments import RIGHT, submission, write_double
 
 HEAVY = ("nbformat", "jsonschema", "numpy", "IPython", "pytest", "rfc3987_syntax", "scipy",
          "matplotlib", "tqdm", "fastapi", "sqlalchemy", "distributed")
@@ -75,3 +78,55 @@ print(json.dumps({"grammar": "rfc3987_syntax" in sys.modules and sys.modules["rf
     report = json.loads(proc.stdout)
     assert report["grammar"] is False
     assert report["error"] and "3" in report["error"], report
+
+
+EARLY = """
+import json, sys
+from autograder import session
+from autograder.cli import main
+engine = ("pytest", "nbformat", "autograder.grading", "autograder.checksession", "reference")
+launches = []
+launch = session.WorkerSlot._launch
+def recording(self):
+    launches.append(sorted(m for m in engine if m in sys.modules))
+    launch(self)
+session.WorkerSlot._launch = recording
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+print(json.dumps({"code": code, "launches": launches}), file=sys.stderr)
+"""
+
+
+def test_grade_and_check_start_the_warm_parent_before_importing_the_engine(
+        tmp_path: Path) -> None:
+    """The warm parent's imports run beside the grader's (``session.start_early``); a run
+    that grades nothing, or fails, leaves neither its slot folder nor its process."""
+    check = ("def test_double(student):\n"
+             "    assert student.double(21) == 42, 'double(21) must be 42'\n")
+    folder = write_double(tmp_path, "double", {"test_double.py": check})
+    notebook = submission(tmp_path / "submitted", "alice", RIGHT)
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    env = {**os.environ, "TMPDIR": str(scratch)}
+
+    def run(*argv: str) -> dict[str, object]:
+        proc = subprocess.run([sys.executable, "-c", EARLY, *argv], capture_output=True,
+                              text=True, timeout=600, env=env)
+        report: dict[str, object] = json.loads(proc.stderr.strip().splitlines()[-1])
+        report["stdout"] = proc.stdout
+        return report
+
+    out = tmp_path / "results"
+    graded = run("grade", str(folder), str(notebook), "--out", str(out), "--no-progress")
+    assert graded["code"] == 0 and graded["launches"] == [[]], graded
+    assert json.loads((out / "alice" / "results.json").read_text())["score"] == 1.0
+    reused = run("grade", str(folder), str(notebook), "--out", str(out), "--no-progress")
+    assert reused["code"] == 0 and reused["launches"] == [[]], reused
+    assert "reused 1 unchanged" in str(reused["stdout"])
+    checked = run("check", str(notebook), "--assignment", str(folder))
+    assert checked["code"] == 0 and checked["launches"] == [[]], checked
+    missing = run("check", str(tmp_path / "nowhere.ipynb"), "--assignment", str(folder))
+    assert missing["code"] != 0 and missing["launches"] == [[]], missing
+    assert not list(scratch.glob("autograder-slot-*")), "a slot folder was left behind"
