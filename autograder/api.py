@@ -137,17 +137,19 @@ def new(name: str, *, out: Path | None = None, title: str | None = None) -> Path
 
 
 def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
-             jobs: int | None = None, options: GradingOptions | None = None) -> "ValidationReport":
+             jobs: int | None = None, options: GradingOptions | None = None,
+             worker: WorkerSlot | None = None) -> "ValidationReport":
     """Release ``assignment``, check nothing leaked, grade its examples and the
     released template, and compare each score with its band in
     ``examples/expected.toml`` (see :mod:`autograder.validate`).
 
     ``work``, when given, keeps the release and the results (feedback pages) there.
+    ``worker``: as for :func:`grade`.
     """
     from autograder.validate import validate as _validate
 
     return _validate(resolve_assignment(assignment), work=None if work is None else Path(work),
-                     jobs=jobs, options=options)
+                     jobs=jobs, options=options, worker=worker)
 
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,

@@ -314,10 +314,12 @@ def _new(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from autograder import api
-    from autograder.validate import format_report
+    with _worker_started_early(True) as worker:
+        from autograder import api
+        from autograder.validate import format_report
 
-    report = api.validate(args.assignment, work=args.work, jobs=args.jobs, options=_options(args))
+        report = api.validate(args.assignment, work=args.work, jobs=args.jobs,
+                              options=_options(args), worker=worker)
     print(format_report(report))
     return 0 if report.ok else 1
 

@@ -341,8 +341,8 @@ def start_early(*, slot: int = 0) -> WorkerSlot:
     The warm parent imports numpy, scipy, matplotlib and IPython (about a second of
     CPU) and comes before the first result; started here, it imports beside the
     caller's own imports and check collection instead of after them (0.2 s sooner
-    to the first result on 2 cores). The command line's ``grade`` and ``check``
-    call this first thing. The caller owns the slot: it hands it to
+    to the first result on 2 cores). The command line's ``grade``, ``check`` and
+    ``validate`` call this first thing. The caller owns the slot: it hands it to
     :class:`~autograder.grading.Grader` (``worker=``) and calls
     :meth:`WorkerSlot.shutdown` in the end (safe after the grader closed it too).
     """

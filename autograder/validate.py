@@ -34,6 +34,7 @@ from autograder.errors import AssignmentError
 from autograder.grading import GradingOptions
 from autograder.release import FORBIDDEN_MARKERS, release
 from autograder.results import SubmissionResult
+from autograder.session import WorkerSlot
 
 __all__ = ["ExampleCheck", "ValidationReport", "validate", "format_report"]
 
@@ -88,7 +89,8 @@ class ValidationReport:
 
 
 def validate(assignment: Assignment, *, work: Path | None = None, jobs: int | None = None,
-             options: GradingOptions | None = None) -> ValidationReport:
+             options: GradingOptions | None = None,
+             worker: WorkerSlot | None = None) -> ValidationReport:
     """Release ``assignment``, look for leaks, grade its examples and check their bands.
 
     Parameters
@@ -101,15 +103,18 @@ def validate(assignment: Assignment, *, work: Path | None = None, jobs: int | No
         Examples graded in parallel (default: the number of cores).
     options : GradingOptions, optional
         As for ``autograder grade``.
+    worker : WorkerSlot, optional
+        A slot started ahead (:func:`autograder.session.start_early`): the first
+        local slot; the caller closes it.
     """
     if work is None:
         with tempfile.TemporaryDirectory(prefix=f"validate-{assignment.name}-") as scratch:
-            return _validate(assignment, Path(scratch), jobs, options)
-    return _validate(assignment, Path(work), jobs, options)
+            return _validate(assignment, Path(scratch), jobs, options, worker)
+    return _validate(assignment, Path(work), jobs, options, worker)
 
 
 def _validate(assignment: Assignment, work: Path, jobs: int | None,
-              options: GradingOptions | None) -> ValidationReport:
+              options: GradingOptions | None, worker: WorkerSlot | None) -> ValidationReport:
     bands, problems = _read_bands(assignment)
     released = work / "release"
     try:
@@ -124,7 +129,7 @@ def _validate(assignment: Assignment, work: Path, jobs: int | None,
         shutil.copyfile(path, submissions / path.name)
     shutil.copyfile(template, submissions / f"{TEMPLATE}.ipynb")
     report = grade_batch(assignment, [submissions], work / "results", jobs=jobs,
-                         options=options, progress=False)
+                         options=options, progress=False, worker=worker)
     results = {r.id: r for r in report.results}
     names = [p.stem for p in examples] + [TEMPLATE]
     for stem in bands:

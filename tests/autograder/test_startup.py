@@ -99,7 +99,7 @@ print(json.dumps({"code": code, "launches": launches}), file=sys.stderr)
 """
 
 
-def test_grade_and_check_start_the_warm_parent_before_importing_the_engine(
+def test_grade_check_and_validate_start_the_warm_parent_before_importing_the_engine(
         tmp_path: Path) -> None:
     """The warm parent's imports run beside the grader's (``session.start_early``); a run
     that grades nothing, or fails, leaves neither its slot folder nor its process."""
@@ -129,4 +129,7 @@ def test_grade_and_check_start_the_warm_parent_before_importing_the_engine(
     assert checked["code"] == 0 and checked["launches"] == [[]], checked
     missing = run("check", str(tmp_path / "nowhere.ipynb"), "--assignment", str(folder))
     assert missing["code"] != 0 and missing["launches"] == [[]], missing
+    validated = run("validate", str(folder))
+    assert validated["launches"] == [[]], validated
+    assert "template" in str(validated["stdout"]), validated
     assert not list(scratch.glob("autograder-slot-*")), "a slot folder was left behind"
