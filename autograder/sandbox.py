@@ -519,7 +519,7 @@ def _within(path: Path, root: Path) -> bool:
     ``path.is_relative_to(root)``) for the absolute, resolved paths used here,
     without building a ``Path`` per parent or raising per miss: the warm parent
     asks this about 10^5 times when it lists the readable paths, on the way to its
-    first child (measured: 0.28 s of CPU with ``parents``, 0.05 s like this).
+    first child (measured: 0.2 s of CPU with ``parents``, 0.035 s like this).
     """
     prefix = root.parts
     return path.parts[:len(prefix)] == prefix
