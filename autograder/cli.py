@@ -7,7 +7,7 @@ import contextlib
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator, Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import autograder
 from autograder.errors import AutograderError, UsageError
@@ -227,19 +227,14 @@ def _options(args: argparse.Namespace) -> GradingOptions:
                           public_only=getattr(args, "public_only", False))
 
 
-@contextlib.contextmanager
-def _worker_started_early(wanted: bool) -> Iterator[WorkerSlot | None]:
-    """A warm parent started before the engine's imports (see ``session.start_early``)."""
+def _worker_started_early(wanted: bool) -> contextlib.AbstractContextManager[WorkerSlot | None]:
+    """A warm parent started before the engine's imports (see ``session.start_early``);
+    the slot's own context shuts it down at the end of the command."""
     if not wanted:
-        yield None
-        return
+        return contextlib.nullcontext()
     from autograder.session import start_early
 
-    worker = start_early()
-    try:
-        yield worker
-    finally:
-        worker.shutdown()
+    return start_early()
 
 
 def _grade(args: argparse.Namespace) -> int:
