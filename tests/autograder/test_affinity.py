@@ -15,15 +15,12 @@ from autograder.assignment import load_assignment
 from autograder.errors import UsageError
 from autograder.grading import Grader
 from autograder.session import StudentSession
-from tests.support.assignments import RIGHT, submission, write_double
+from tests.support.assignments import CHECK, RIGHT, submission, write_double
 
 CORES = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
 needs_two_cores = pytest.mark.skipif(
     len(CORES) < 2, reason="needs Linux's sched_setaffinity and two cores this process may use "
                            "(a slot is pinned only then)")
-
-CHECK = ("def test_double(student):\n"
-         "    assert student.double(21) == 42, 'double(21) must be 42'\n")
 
 
 def cores_of(pid: int) -> set[int]:

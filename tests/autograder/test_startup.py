@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 import autograder
-from tests.support.assignments import RIGHT, submission, write_double
+from tests.support.assignments import CHECK, RIGHT, submission, write_double
 
 HEAVY = ("nbformat", "jsonschema", "numpy", "IPython", "pytest", "rfc3987_syntax", "scipy",
          "matplotlib", "tqdm", "fastapi", "sqlalchemy", "distributed")
@@ -103,9 +103,7 @@ def test_grade_check_and_validate_start_the_warm_parent_before_importing_the_eng
         tmp_path: Path) -> None:
     """The warm parent's imports run beside the grader's (``session.start_early``); a run
     that grades nothing, or fails, leaves neither its slot folder nor its process."""
-    check = ("def test_double(student):\n"
-             "    assert student.double(21) == 42, 'double(21) must be 42'\n")
-    folder = write_double(tmp_path, "double", {"test_double.py": check})
+    folder = write_double(tmp_path, "double", {"test_double.py": CHECK})
     notebook = submission(tmp_path / "submitted", "alice", RIGHT)
     scratch = tmp_path / "scratch"
     scratch.mkdir()

@@ -7,6 +7,9 @@ from pathlib import Path
 import nbformat
 
 RIGHT = "def double(x):\n    return 2 * x\n"
+#: a public check of ``double``, for ``write_double``'s ``checks``
+CHECK = ("def test_double(student):\n"
+         "    assert student.double(21) == 42, 'double(21) must be 42'\n")
 
 
 def write_double(root: Path, name: str, checks: dict[str, str]) -> Path:
