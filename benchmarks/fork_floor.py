@@ -16,6 +16,9 @@ fork of
   without and then with ``gc.freeze()`` in the parent before the fork (what the
   worker does: the child's full garbage collections then skip, and so neither walk
   nor copy on write, every object the parent made),
+* the warm parent after :func:`autograder.worker.hugepages.collapse` (what the worker
+  does once its second child runs), bare and with one cell: the fork copies one
+  page-table entry per 2 MiB instead of per 4 KiB where its heap could be collapsed,
 
 split into the parent's share (``fork``) and the child's (everything to its exit),
 with the parent's resident memory and the ratio of each to the bare parent. The
@@ -80,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     import scipy.spatial  # noqa: F401
     import scipy.special  # noqa: F401
 
-    from autograder.worker import execute
+    from autograder.worker import execute, hugepages
 
     shell = execute.make_shell()
     execute.warm_up(shell)
@@ -95,12 +98,21 @@ def main(argv: list[str] | None = None) -> int:
     gc.freeze()
     rows.append(("  the same after gc.freeze()", _rss_mib(), forks(
         max(1, args.count // 4), lambda: shell.run_cell(allocate, store_history=False))))
+    collapsed = hugepages.collapse()
+    rows.append(("warm parent in huge pages", _rss_mib(), forks(args.count, lambda: None)))
+    rows.append(("  child runs one cell", _rss_mib(), forks(
+        args.count, lambda: shell.run_cell("def double(x):\n    return 2 * x\n",
+                                           store_history=False))))
     bare = sum(rows[0][2][:2])
     for label, rss, (parent, child, wall) in rows:
         print(f"  {label:<34} {rss:8.1f} {parent:7.1f} {child:7.1f} {parent + child:7.1f} "
               f"{wall:7.1f} {(parent + child) / bare:9.1f}x", flush=True)
-    plain, frozen = sum(rows[-2][2][:2]), sum(rows[-1][2][:2])
+    plain, frozen = sum(rows[3][2][:2]), sum(rows[4][2][:2])
     print(f"ratio allocating cell, without / with gc.freeze(): {plain / frozen:.2f}x CPU")
+    print(f"huge pages: {collapsed / (1 << 20):.0f} MiB collapsed "
+          f"(autograder.worker.hugepages, after the warm parent's second child); "
+          f"ratio warm parent, 4 KiB / huge pages: {sum(rows[1][2][:2]) / sum(rows[5][2][:2]):.2f}x "
+          f"bare child, {sum(rows[2][2][:2]) / sum(rows[6][2][:2]):.2f}x with one cell")
     return 0
 
 
