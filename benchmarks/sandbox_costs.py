@@ -10,8 +10,11 @@ time and its exit, from ``RUSAGE_CHILDREN``) of
 
 * a bare fork (the peer: the child exits at once);
 * the whole sandbox (:func:`autograder.sandbox.enter_sandbox` with the default
-  policy), then the same with one part turned off by policy at a time, so that each
-  part's cost is the difference from the whole;
+  policy), first with a network namespace made by each child, then as the worker
+  runs it (one empty namespace made once by the parent, as root), then with one part
+  turned off by policy at a time, so that each part's cost is the difference from
+  the whole (without the network namespace, a child of that parent goes back to the
+  host's);
 * the whole sandbox and one IPython cell (what a trivial submission's child does
   before it answers the checks' calls),
 
@@ -86,7 +89,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=200, help="children per line (default 200)")
     args = parser.parse_args(argv)
-    root = Path(tempfile.mkdtemp(prefix="sandbox-costs-"))
+    with tempfile.TemporaryDirectory(prefix="sandbox-costs-") as scratch:
+        return measure(args.count, Path(scratch))
+
+
+def measure(count: int, root: Path) -> int:
+    """Print the table, with the children's folders in ``root``."""
     os.chmod(root, 0o711)
     work = root / "work"
     work.mkdir(mode=0o711)
@@ -97,21 +105,25 @@ def main(argv: list[str] | None = None) -> int:
     sandbox.prime_caches()
     syscalls.prepare_filters()
     whole = sandbox.IsolationPolicy()
-    policies = {"whole sandbox": whole}
+    # The first line before the parent moves into the slot's empty network namespace
+    # (sandbox.prepare_network, as the worker does), so each child makes its own.
+    policies = {"whole, a network namespace per child": whole, "whole sandbox": whole}
     for part, setting in (("namespaces", "namespaces"), ("network namespace", "network_namespace"),
                           ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),
                           ("user switch", "drop_user")):
         policies[f"  without {part}"] = dataclasses.replace(whole, **{setting: False})
-    print(f"load average {os.getloadavg()[0]:.2f}; uid {os.geteuid()}; {args.count} children "
+    print(f"load average {os.getloadavg()[0]:.2f}; uid {os.geteuid()}; {count} children "
           "per line; ms per child (busy: the whole machine's, counted until 0.5 s after the last)")
     print(f"  {'child':<36} {'CPU':>7} {'busy':>7} {'CPU ratio':>10}")
     gc.freeze()
-    bare, busy = children(args.count, work, lambda _: None)
+    bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
     for label, policy in policies.items():
         probe = Path(tempfile.mkdtemp(dir=work))
         sandbox.coverable_folders(exclude, probe, policy)
         sandbox.prepare_cgroup(policy, 0)
+        if not label.endswith("per child"):
+            sandbox.prepare_network(whole)  # once, as the worker does: the children share it
         shared = sandbox.shared_landlock(policy, work, exclude)
         os.rmdir(probe)
 
@@ -119,15 +131,15 @@ def main(argv: list[str] | None = None) -> int:
                   shared: sandbox.SharedLandlock = shared) -> None:
             sandbox.enter_sandbox(policy, workdir, slot=0, exclude=exclude, shared=shared)
 
-        cpu, busy = children(args.count, work, enter)
+        cpu, busy = children(count, work, enter)
         print(f"  {label:<36} {cpu:7.2f} {busy:7.2f} {cpu / bare:9.1f}x", flush=True)
-        if policy is whole:
+        if label == "whole sandbox":
             def enter_and_run(workdir: Path) -> None:
                 enter(workdir)
                 execute.Execution(shell, execute.capture_output(1 << 20)).run(
                     [(0, CELL)], lambda index: None)
 
-            cpu, busy = children(args.count, work, enter_and_run)
+            cpu, busy = children(count, work, enter_and_run)
             print(f"  {'whole sandbox and one IPython cell':<36} {cpu:7.2f} {busy:7.2f} "
                   f"{cpu / bare:9.1f}x", flush=True)
         shared.close()

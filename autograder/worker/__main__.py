@@ -242,6 +242,7 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     exclude = [Path(p) for p in request.get("exclude", [])]
     sandbox.coverable_folders(exclude, workdir, policy)
     sandbox.prepare_cgroup(policy, int(request["slot"]))
+    sandbox.prepare_network(policy)
     _probes()
     shared = _shared_landlock(request, policy, workdir, exclude)
     # Everything this process made moves to the collector's permanent generation: the

@@ -540,6 +540,35 @@ def test_tcp_connect_to_loopback_listener_fails(policy: IsolationPolicy, workdir
             listener.accept()
 
 
+NETNS_CODE = "import os\ndef netns():\n    return os.readlink('/proc/self/ns/net')\n"
+NETNS_CHECK = ("import os\n"
+               "def test_netns(student):\n"
+               "    with open(os.environ['NETNS_RECORD'], 'a') as record:\n"
+               "        record.write(student.netns() + '\\n')\n")
+
+
+def test_a_slots_children_share_one_empty_network_namespace_made_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """As root the warm parent makes the empty namespace once (``prepare_network``); each
+    child is born in it, and none is in the grader's."""
+    require_root("moving the warm parent into a network namespace")
+    from autograder.assignment import load_assignment
+    from autograder.grading import Grader
+    from tests.support.assignments import submission, write_double
+
+    record = tmp_path / "netns.txt"
+    monkeypatch.setenv("NETNS_RECORD", str(record))
+    folder = write_double(tmp_path, "netns", {"test_netns.py": NETNS_CHECK})
+    with Grader(load_assignment(folder)) as grader:
+        for k in range(2):
+            assert grader.grade(submission(tmp_path / "in", f"s{k}", NETNS_CODE)).score == 1.0
+        assert grader._slot.warm_parent is not None
+        parent = os.readlink(f"/proc/{grader._slot.warm_parent}/ns/net")
+    seen = record.read_text().split()
+    assert seen == [parent, parent]
+    assert parent != os.readlink("/proc/self/ns/net")
+
+
 @pytest.mark.parametrize("policy", [DEFAULT, LANDLOCK_ONLY], ids=["default", "landlock-only"])
 def test_tcp_bind_fails(policy: IsolationPolicy, workdir: Path) -> None:
     require_landlock(4, "blocking TCP bind")
