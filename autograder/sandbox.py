@@ -8,8 +8,9 @@ which, in this order:
 2. replaces the environment (no tokens, no CI variables, not even in
    ``/proc/self/environ``) and moves into the submission's working directory;
 3. sets resource limits (address space, CPU, processes, open files, file size, core);
-4. as root, moves into an empty network namespace and switches to a user id of its
-   own (``base_uid + slot``) keeping only ``CAP_DAC_READ_SEARCH``;
+4. as root, is in an empty network namespace (the one its warm parent made once for
+   the slot, see :func:`prepare_network`, or one of its own) and switches to a user id
+   of its own (``base_uid + slot``) keeping only ``CAP_DAC_READ_SEARCH``;
 5. enforces a Landlock ruleset: read-only access to the Python installation and the
    system directories, full access to the working directory only, no TCP bind or
    connect, no signals or abstract UNIX sockets outside the sandbox.
