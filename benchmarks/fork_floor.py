@@ -17,7 +17,7 @@ fork of
   worker does: the child's full garbage collections then skip, and so neither walk
   nor copy on write, every object the parent made),
 * the warm parent after :func:`autograder.worker.hugepages.collapse` (what the worker
-  does once its second child runs), bare and with one cell: the fork copies one
+  does once it has forked 50 children), bare and with one cell: the fork copies one
   page-table entry per 2 MiB instead of per 4 KiB where its heap could be collapsed,
 
 split into the parent's share (``fork``) and the child's (everything to its exit),
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     plain, frozen = sum(rows[3][2][:2]), sum(rows[4][2][:2])
     print(f"ratio allocating cell, without / with gc.freeze(): {plain / frozen:.2f}x CPU")
     print(f"huge pages: {collapsed / (1 << 20):.0f} MiB collapsed "
-          f"(autograder.worker.hugepages, after the warm parent's second child); "
+          f"(autograder.worker.hugepages, after the warm parent's 50th child); "
           f"ratio warm parent, 4 KiB / huge pages: {sum(rows[1][2][:2]) / sum(rows[5][2][:2]):.2f}x "
           f"bare child, {sum(rows[2][2][:2]) / sum(rows[6][2][:2]):.2f}x with one cell")
     return 0

@@ -256,10 +256,7 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     sub.close()
     protocol.send_message(control, {"pid": pid})
     _FORKED[0] += 1
-    if _FORKED[0] == 2:
-        # Once a second submission shows this is a batch, while its child runs: about
-        # 0.2 s of CPU, which makes every later fork and exit some 3 ms cheaper
-        # (benchmarks/fork_floor.py). A single self-check never pays it.
+    if _FORKED[0] == hugepages.COLLAPSE_AFTER:  # while that child runs; a short batch never pays
         hugepages.collapse()
     return True
 

@@ -22,6 +22,10 @@ from collections.abc import Callable, Iterator
 
 MADV_COLLAPSE = 25  # <linux/mman.h>
 HUGE_PAGE = 2 << 20
+#: the warm parent collapses after forking this many children: the collapse costs the
+#: kernel about 2.7 ms of CPU per MiB (0.15-0.2 s once), and saves each later fork and
+#: exit about 3 ms (benchmarks/fork_floor.py), so only a batch this long soon pays it back
+COLLAPSE_AFTER = 50
 
 
 @functools.cache
