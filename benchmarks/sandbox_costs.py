@@ -105,44 +105,44 @@ def measure(count: int, root: Path) -> int:
     sandbox.prime_caches()
     syscalls.prepare_filters()
     whole = sandbox.IsolationPolicy()
-    # The first line before the parent moves into the slot's empty network namespace
-    # (sandbox.prepare_network, as the worker does), so each child makes its own.
-    policies = {"whole, a network namespace per child": whole, "whole sandbox": whole}
-    for part, setting in (("namespaces", "namespaces"), ("network namespace", "network_namespace"),
-                          ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),
-                          ("user switch", "drop_user")):
-        policies[f"  without {part}"] = dataclasses.replace(whole, **{setting: False})
     print(f"load average {os.getloadavg()[0]:.2f}; uid {os.geteuid()}; {count} children "
           "per line; ms per child (busy: the whole machine's, counted until 0.5 s after the last)")
     print(f"  {'child':<36} {'CPU':>7} {'busy':>7} {'CPU ratio':>10}")
     gc.freeze()
     bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
-    for label, policy in policies.items():
+
+    def line(label: str, policy: sandbox.IsolationPolicy, *, with_cell: bool = False) -> None:
         probe = Path(tempfile.mkdtemp(dir=work))
         sandbox.coverable_folders(exclude, probe, policy)
         sandbox.prepare_cgroup(policy, 0)
-        if not label.endswith("per child"):
-            sandbox.prepare_network(whole)  # once, as the worker does: the children share it
         shared = sandbox.shared_landlock(policy, work, exclude)
         os.rmdir(probe)
 
-        def enter(workdir: Path, policy: sandbox.IsolationPolicy = policy,
-                  shared: sandbox.SharedLandlock = shared) -> None:
+        def enter(workdir: Path) -> None:
             sandbox.enter_sandbox(policy, workdir, slot=0, exclude=exclude, shared=shared)
 
-        cpu, busy = children(count, work, enter)
-        print(f"  {label:<36} {cpu:7.2f} {busy:7.2f} {cpu / bare:9.1f}x", flush=True)
-        if label == "whole sandbox":
-            def enter_and_run(workdir: Path) -> None:
-                enter(workdir)
-                execute.Execution(shell, execute.capture_output(1 << 20)).run(
-                    [(0, CELL)], lambda index: None)
+        def enter_and_run(workdir: Path) -> None:
+            enter(workdir)
+            execute.Execution(shell, execute.capture_output(1 << 20)).run(
+                [(0, CELL)], lambda index: None)
 
-            cpu, busy = children(count, work, enter_and_run)
-            print(f"  {'whole sandbox and one IPython cell':<36} {cpu:7.2f} {busy:7.2f} "
-                  f"{cpu / bare:9.1f}x", flush=True)
+        bodies = [(label, enter)]
+        if with_cell:
+            bodies.append(("whole sandbox and one IPython cell", enter_and_run))
+        for name, body in bodies:
+            cpu, busy = children(count, work, body)
+            print(f"  {name:<36} {cpu:7.2f} {busy:7.2f} {cpu / bare:9.1f}x", flush=True)
         shared.close()
+
+    # Before the parent moves into the slot's empty network namespace, each child makes its own.
+    line("whole, a network namespace per child", whole)
+    sandbox.prepare_network(whole)  # once, as the worker does: the children share it
+    line("whole sandbox", whole, with_cell=True)
+    for part, setting in (("namespaces", "namespaces"), ("network namespace", "network_namespace"),
+                          ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),
+                          ("user switch", "drop_user")):
+        line(f"  without {part}", dataclasses.replace(whole, **{setting: False}))
     return 0
 
 
