@@ -46,14 +46,17 @@ def scores(results: Path) -> dict[str, dict[str, float]]:
     return found
 
 
-def submissions(folder: Path) -> list[str]:
-    """The graded examples copied into ``folder`` (world-readable) as nbgrader lays them out."""
+def submissions(folder: Path, copies: int = 1) -> list[str]:
+    """The graded examples copied into ``folder`` (world-readable) as nbgrader lays them out;
+    with ``copies`` > 1, each that many times, as students ``<example>-<k>``."""
     paths = []
-    for name in GRADED:
-        target = folder / "submitted" / name / "hull" / "hull.ipynb"
-        target.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy(EXAMPLES / f"{name}.ipynb", target)
-        paths.append(str(target))
+    for k in range(copies):
+        for name in GRADED:
+            student = name if copies == 1 else f"{name}-{k}"
+            target = folder / "submitted" / student / "hull" / "hull.ipynb"
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy(EXAMPLES / f"{name}.ipynb", target)
+            paths.append(str(target))
     envs._open_up(folder)
     return paths
 
@@ -273,3 +276,33 @@ def test_ordinary_user_installed_package_assignment_outside(
                     ignore=shutil.ignore_patterns("examples"))
     envs._open_up(course)
     assert grade_with(env, str(course / "hull"), course, cwd=course) == expected
+
+
+def test_ordinary_user_long_batch_grades_every_copy_alike(
+        workspace: Path, installs: Installs, expected: dict[str, dict[str, float]]) -> None:
+    """A batch long enough for the warm parent to move its heap into huge pages (after
+    ``hugepages.COLLAPSE_AFTER`` children), graded by an ordinary user on one slot: every
+    copy of an example gets the developer's scores, before the move and after it."""
+    from autograder.worker import hugepages
+
+    made = installs.get("user")
+    if isinstance(made, str):
+        pytest.skip(made)
+    env, _ = made
+    course = workspace / "user-long-batch"
+    shutil.copytree(ROOT / "assignments" / "hull", course / "hull",
+                    ignore=shutil.ignore_patterns("examples"))
+    envs._open_up(course)
+    copies = hugepages.COLLAPSE_AFTER // len(GRADED) + 3
+    out = course / "results"
+    out.mkdir()
+    if env.user is not None:
+        shutil.chown(out, env.user, env.user)
+    proc = env.run("autograder", "grade", str(course / "hull"),
+                   *submissions(course / "in", copies), "--out", str(out), "--jobs", "1",
+                   "--no-progress", cwd=course)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    found = scores(out)
+    assert len(found) == copies * len(GRADED)
+    for student, checks in found.items():
+        assert checks == expected[student.rsplit("-", 1)[0]], student
