@@ -2,22 +2,22 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Sequence
 
-from autograder import exports
-from autograder.assignment import Assignment, load_assignment
-from autograder.backends import DaskSpec, TLSFiles
-from autograder.batch import BatchReport, Shard, error_result, grade_batch
-from autograder.grading import Grader, GradingOptions
-from autograder.release import release as _release
-from autograder.results import SubmissionResult
-from autograder.session import WorkerSlot
+from autograder.authoring.gradescope import GRADESCOPE_ROOT, gradescope_zip, run_submission
+from autograder.authoring.release import release as _release
+from autograder.engine.assignment import Assignment, load_assignment
+from autograder.engine.grader import Grader, GradingOptions
+from autograder.engine.slot import GradingSlot
+from autograder.results import exports
+from autograder.results.model import SubmissionResult
+from autograder.runners.batch import BatchRun, Shard, grade_batch
+from autograder.runners.jobs import DaskSpec, TLSFiles
 
 if TYPE_CHECKING:
-    from autograder.shards import MergeReport
-    from autograder.validate import ValidationReport
+    from autograder.authoring.validate import ValidationRun
+    from autograder.results.merge import MergeRun
 
 
 def resolve_assignment(spec: str | Path | Assignment) -> Assignment:
@@ -35,14 +35,14 @@ def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, o
           progress: bool | None = None,
           on_result: Callable[[SubmissionResult], None] | None = None,
           junit: Path | None = None, dask: DaskSpec | str | None = None,
-          shard: Shard | str | None = None, worker: WorkerSlot | None = None) -> BatchReport:
-    """Grade notebooks (files or folders) into ``out``; see :func:`autograder.batch.grade_batch`.
+          shard: Shard | str | None = None, worker: GradingSlot | None = None) -> BatchRun:
+    """Grade notebooks (files or folders) into ``out``; see :func:`autograder.runners.batch.grade_batch`.
 
     ``junit``, when given, is a file for the JUnit XML report of every result in
     ``out``. ``dask`` (a :class:`DaskSpec`, or an address such as ``"local:2"``)
     grades on a Dask cluster instead of ``jobs`` local processes; ``shard``
     (``"K/N"``) grades only that share of the submissions. ``worker``, a slot from
-    :func:`autograder.session.start_early`, is the first local slot; the caller closes
+    :func:`autograder.engine.slot.start_early`, is the first local slot; the caller closes
     it after the call (the command line starts it before importing the engine).
     """
     found = resolve_assignment(assignment)
@@ -57,12 +57,12 @@ def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, o
 
 
 def merge(folders: Sequence[Path], *, out: Path, assignment: str | Path | Assignment | None = None,
-          junit: Path | None = None) -> "MergeReport":
+          junit: Path | None = None) -> "MergeRun":
     """Merge shard result folders into ``out`` with ``grades.csv``, the summary and, if asked, JUnit.
 
     ``assignment``, when given, only supplies the summary's title.
     """
-    from autograder.shards import merge_results
+    from autograder.results.merge import merge_results
 
     title = resolve_assignment(assignment).title if assignment is not None else None
     report = merge_results([Path(f) for f in folders], out=Path(out), title=title)
@@ -78,12 +78,12 @@ def run_worker(address: str, *, slots: int = 1, tls: TLSFiles | None = None,
 
     Needs the ``dask`` extra (``pip install "numgrade[dask]"``).
     """
-    from autograder.backends import load_dask_backend
+    from autograder.runners.backends import load_dask_backend
 
     load_dask_backend().run_worker(address, slots=slots, tls=tls, insecure=insecure)
 
 
-def ci_report(report: BatchReport, *, step_summary: Path | None = None) -> list[str]:
+def ci_report(report: BatchRun, *, step_summary: Path | None = None) -> list[str]:
     """The lines a CI log needs (``Points X/Y`` per submission, for GitHub Classroom).
 
     ``step_summary``, when given (GitHub's ``$GITHUB_STEP_SUMMARY``), gets a
@@ -96,10 +96,10 @@ def ci_report(report: BatchReport, *, step_summary: Path | None = None) -> list[
 
 def gradescope(assignment: str | Path | Assignment, *, out: Path) -> Path:
     """Write the autograder zip Gradescope takes for ``assignment`` into ``out``; return its path."""
-    return exports.gradescope_zip(resolve_assignment(assignment), Path(out))
+    return gradescope_zip(resolve_assignment(assignment), Path(out))
 
 
-def gradescope_run(root: str | Path = exports.GRADESCOPE_ROOT) -> int:
+def gradescope_run(root: str | Path = GRADESCOPE_ROOT) -> int:
     """Grade a submission the Gradescope way; what the zip's ``run_autograder`` calls.
 
     Reads the notebook from ``root/submission/``, the assignment from
@@ -107,29 +107,17 @@ def gradescope_run(root: str | Path = exports.GRADESCOPE_ROOT) -> int:
     (pictures in ``root/results/images/``). A grader failure is written as an
     "error" result, so Gradescope always gets a ``results.json``. Returns 0.
     """
-    root = Path(root)
-    found = load_assignment(exports.bundled_assignment(root / "source"))
-    notebook, note = exports.pick_notebook(root / "submission", found.notebook.name)
-    student = exports.gradescope_student(root) or notebook.stem
-    out = root / "results"
-    with Grader(found) as grader:
-        try:
-            result = grader.grade(notebook, id=student, out_dir=out)
-        except Exception as exc:  # the grader's own failure: Gradescope still gets a result
-            result = error_result(found, notebook, student, exc)
-    if note:
-        result = dataclasses.replace(result, output=f"{note} {result.output}")
-    exports.write_gradescope_result(out, result)
+    run_submission(Path(root))
     return 0
 
 
 def new(name: str, *, out: Path | None = None, title: str | None = None) -> Path:
-    """Write a working assignment folder ``out/name`` (see :mod:`autograder.scaffold`).
+    """Write a working assignment folder ``out/name`` (see :mod:`autograder.authoring.scaffold`).
 
     ``out`` defaults to ``./assignments`` when the current folder has one, else
     the current folder. Returns the new folder.
     """
-    from autograder.scaffold import new_assignment
+    from autograder.authoring.scaffold import new_assignment
 
     if out is None:
         out = Path("assignments") if Path("assignments").is_dir() else Path(".")
@@ -138,15 +126,15 @@ def new(name: str, *, out: Path | None = None, title: str | None = None) -> Path
 
 def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
              jobs: int | None = None, options: GradingOptions | None = None,
-             worker: WorkerSlot | None = None) -> "ValidationReport":
+             worker: GradingSlot | None = None) -> "ValidationRun":
     """Release ``assignment``, check nothing leaked, grade its examples and the
     released template, and compare each score with its band in
-    ``examples/expected.toml`` (see :mod:`autograder.validate`).
+    ``examples/expected.toml`` (see :mod:`autograder.authoring.validate`).
 
     ``work``, when given, keeps the release and the results (feedback pages) there.
     ``worker``: as for :func:`grade`.
     """
-    from autograder.validate import validate as _validate
+    from autograder.authoring.validate import validate as _validate
 
     return _validate(resolve_assignment(assignment), work=None if work is None else Path(work),
                      jobs=jobs, options=options, worker=worker)
@@ -154,7 +142,7 @@ def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
           options: GradingOptions | None = None,
-          worker: WorkerSlot | None = None) -> SubmissionResult:
+          worker: GradingSlot | None = None) -> SubmissionResult:
     """Run the public checks on one notebook, as a student does before submitting.
 
     ``worker``: as for :func:`grade`.

@@ -16,10 +16,10 @@ from autograder.errors import AutograderError, UsageError
 # imported inside the handler that needs it, so that `--help` and `--version` start
 # in a fraction of a second (tests/autograder/test_startup.py checks sys.modules).
 if TYPE_CHECKING:
-    from autograder.backends import DaskSpec, TLSFiles
-    from autograder.grading import GradingOptions
-    from autograder.results import SubmissionResult
-    from autograder.session import WorkerSlot
+    from autograder.engine.grader import GradingOptions
+    from autograder.engine.slot import GradingSlot
+    from autograder.results.model import SubmissionResult
+    from autograder.runners.jobs import DaskSpec, TLSFiles
 
 
 def _positive_int(text: str) -> int:
@@ -135,7 +135,7 @@ def _cluster_security_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _tls(args: argparse.Namespace) -> "TLSFiles | None":
-    from autograder.backends import TLSFiles
+    from autograder.runners.jobs import TLSFiles
 
     if args.tls_ca_file is None and args.tls_cert is None:
         if args.tls_key is not None:
@@ -148,7 +148,7 @@ def _tls(args: argparse.Namespace) -> "TLSFiles | None":
 
 
 def _dask(args: argparse.Namespace) -> "DaskSpec | None":
-    from autograder.backends import DaskSpec
+    from autograder.runners.jobs import DaskSpec
 
     if args.dask is None:
         if args.insecure or args.tls_ca_file or args.tls_cert:
@@ -221,18 +221,18 @@ def _timing_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _options(args: argparse.Namespace) -> GradingOptions:
-    from autograder.grading import GradingOptions
+    from autograder.engine.grader import GradingOptions
 
     return GradingOptions(notebook_timeout=args.timeout, call_timeout=args.call_timeout,
                           public_only=getattr(args, "public_only", False))
 
 
-def _worker_started_early(wanted: bool) -> contextlib.AbstractContextManager[WorkerSlot | None]:
+def _worker_started_early(wanted: bool) -> contextlib.AbstractContextManager[GradingSlot | None]:
     """A warm parent started before the engine's imports (see ``session.start_early``);
     the slot's own context shuts it down at the end of the command."""
     if not wanted:
         return contextlib.nullcontext()
-    from autograder.session import start_early
+    from autograder.engine.slot import start_early
 
     return start_early()
 
@@ -311,7 +311,7 @@ def _new(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     with _worker_started_early(True) as worker:
         from autograder import api
-        from autograder.validate import format_report
+        from autograder.authoring.validate import format_report
 
         report = api.validate(args.assignment, work=args.work, jobs=args.jobs,
                               options=_options(args), worker=worker)
@@ -365,9 +365,9 @@ def _submit(args: argparse.Namespace) -> int:
 
 def _say_missing_protections() -> None:
     """Say once, before grading, which protections this machine cannot give."""
-    from autograder import sandbox
+    from autograder.sandbox import confine
 
-    for note in sandbox.probe_support().notes:
+    for note in confine.probe_support().notes:
         print(f"autograder: note: {note}", file=sys.stderr)
 
 

@@ -33,8 +33,8 @@ import pytest  # noqa: E402
 from _pytest.runner import runtestprotocol  # noqa: E402
 from IPython.core.inputtransformer2 import TransformerManager  # noqa: E402
 
-from autograder.assignment import load_assignment  # noqa: E402
-from autograder.plugin import Credit, check_name, item_points  # noqa: E402
+from autograder.engine.assignment import load_assignment  # noqa: E402
+from autograder.engine.plugin import Credit, check_name, item_points  # noqa: E402
 
 
 class _Feedback:

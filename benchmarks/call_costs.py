@@ -8,16 +8,16 @@ round trip (the arguments framed as JSON and raw array bytes, the answer framed
 back, the child's CPU clock read around it). This prints, in one run, the CPU
 microseconds per call on each side (grader + worker), for a few kinds of
 arguments, with the slot on one core as the engine runs it (see
-:mod:`autograder.affinity`) and with ``AUTOGRADER_PIN_CORES=0``, against two
+:mod:`autograder.sandbox.affinity`) and with ``AUTOGRADER_PIN_CORES=0``, against two
 peers that run in this process:
 
 * **direct**: the same function called directly (what the bare floor pays);
 * **framed in process**: the same message and answer encoded and decoded with
-  :mod:`autograder.protocol`, without a second process (what the framing costs
+  :mod:`autograder.boundary.protocol`, without a second process (what the framing costs
   without the system calls, the wake-ups and the clock).
 
 With the hull assignment (unless ``--no-hull``) it also grades its examples once
-each with one :class:`~autograder.grading.Grader` and counts the calls per
+each with one :class:`~autograder.engine.grader.Grader` and counts the calls per
 submission, so the boundary's share of a hull submission can be read off:
 calls per submission times the cost per call. CPU of the worker is the child's
 own (``/proc/<pid>/stat``, in clock ticks: use many calls). Not a test: nothing
@@ -38,11 +38,13 @@ sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
 
 import numpy as np  # noqa: E402
 
-from autograder import affinity, protocol  # noqa: E402
-from autograder.cputime import process_cpu_seconds  # noqa: E402
-from autograder.proxy import CallLog, Student  # noqa: E402
-from autograder.sandbox import IsolationPolicy  # noqa: E402
-from autograder.session import StudentSession, WorkerSlot  # noqa: E402
+from autograder.sandbox import affinity  # noqa: E402
+
+from autograder.boundary import protocol  # noqa: E402
+from autograder.sandbox.cputime import process_cpu_seconds  # noqa: E402
+from autograder.engine.proxy import CallLog, Student  # noqa: E402
+from autograder.sandbox.confine import IsolationPolicy  # noqa: E402
+from autograder.engine.slot import StudentProcess, GradingSlot  # noqa: E402
 
 NOTEBOOK = '''
 import numpy as np
@@ -95,8 +97,8 @@ def measure(args: argparse.Namespace, pinned: bool) -> dict[str, tuple[float, fl
     on one core as the engine runs it, or with ``AUTOGRADER_PIN_CORES=0``."""
     os.environ[affinity.ENVIRONMENT_VARIABLE] = "1" if pinned else "0"
     found: dict[str, tuple[float, float]] = {}
-    with WorkerSlot() as slot, affinity.on_core(slot.core):
-        session = StudentSession(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
+    with GradingSlot() as slot, affinity.on_core(slot.core):
+        session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
                                  policy=IsolationPolicy(), notebook_timeout=60)
         session.start()
         student = Student(session, timeout=120, functions=session.report.functions,
@@ -137,19 +139,19 @@ def boundary(args: argparse.Namespace) -> None:
 
 def hull_calls() -> None:
     """Calls per hull submission, every check and public checks only."""
-    from autograder.assignment import load_assignment
-    from autograder.grading import Grader, GradingOptions
+    from autograder.engine.assignment import load_assignment
+    from autograder.engine.grader import Grader, GradingOptions
 
     hull = ROOT / "assignments" / "hull"
     files = sorted((hull / "examples").glob("*.ipynb"))
-    counted = StudentSession.call
+    counted = StudentProcess.call
     calls = [0]
 
-    def counting(self: StudentSession, *a: Any, **k: Any) -> Any:
+    def counting(self: StudentProcess, *a: Any, **k: Any) -> Any:
         calls[0] += 1
         return counted(self, *a, **k)
 
-    StudentSession.call = counting  # type: ignore[method-assign]
+    StudentProcess.call = counting  # type: ignore[method-assign]
     try:
         for public in (False, True):
             with Grader(load_assignment(hull), GradingOptions(public_only=public)) as grader:
@@ -160,7 +162,7 @@ def hull_calls() -> None:
                 print(f"hull, {label}: {calls[0] / len(files):.1f} calls per submission "
                       f"(over its {len(files)} examples)")
     finally:
-        StudentSession.call = counted  # type: ignore[method-assign]
+        StudentProcess.call = counted  # type: ignore[method-assign]
 
 
 def main() -> None:

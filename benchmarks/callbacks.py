@@ -24,10 +24,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from autograder.callbacks import traced
-from autograder.proxy import CallLog, Student
-from autograder.sandbox import IsolationPolicy
-from autograder.session import StudentSession, WorkerSlot
+from autograder.engine.callbacks import traced
+from autograder.engine.proxy import CallLog, Student
+from autograder.engine.slot import GradingSlot, StudentProcess
+from autograder.sandbox.confine import IsolationPolicy
 
 NOTEBOOK = '''
 def plain(x):
@@ -44,7 +44,7 @@ def scalars(f, n):
 '''
 
 
-def best(repeat: int, session: StudentSession, run: Callable[[], Any]) -> tuple[float, float]:
+def best(repeat: int, session: StudentProcess, run: Callable[[], Any]) -> tuple[float, float]:
     """(best wall seconds, CPU seconds charged to the worker in that run)."""
     results = []
     for _ in range(repeat):
@@ -61,8 +61,8 @@ def main() -> None:
     parser.add_argument("--scalars", type=int, default=10_000)
     parser.add_argument("--calls", type=int, default=200, help="calls timed for the one-call figures")
     args = parser.parse_args()
-    with WorkerSlot() as slot:
-        session = StudentSession(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
+    with GradingSlot() as slot:
+        session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
                                  policy=IsolationPolicy(), notebook_timeout=60)
         session.start()
         student = Student(session, timeout=120, functions=session.report.functions,
@@ -73,7 +73,7 @@ def main() -> None:
             session.close()
 
 
-def report(args: argparse.Namespace, session: StudentSession, student: Student) -> None:
+def report(args: argparse.Namespace, session: StudentProcess, student: Student) -> None:
     k, n = args.calls, args.scalars
     remote, local = traced(np.sin), traced(np.sin, safe=True)
     rows = [

@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import nbformat
-
 from cpu_roles import RoleSampler
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,7 +39,7 @@ def build_batch(folder: Path, count: int) -> list[Path]:
 
 def run(label: str, folder: Path, out: Path, **backend: object) -> dict[str, float]:
     from autograder import api
-    from autograder.grading import GradingOptions
+    from autograder.engine.grader import GradingOptions
 
     first: list[float] = []
     sampler = RoleSampler().start() if ARGS.cpu else None

@@ -5,7 +5,7 @@ Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-b
 
 Grades ``count`` submissions (the hull assignment's examples, in turn, or with
 ``--trivial`` the one-cell, one-check assignment of ``engine_vs_peers.py``) with one
-:class:`autograder.grading.Grader`, after one warm-up submission that starts the
+:class:`autograder.engine.grader.Grader`, after one warm-up submission that starts the
 warm worker and is not counted, and times each phase of every submission:
 
 * static scan: ``staticscan.scan`` of the cells (grader);
@@ -13,15 +13,15 @@ warm worker and is not counted, and times each phase of every submission:
   (grader, the warm parent's ``fork`` and the child entering the sandbox);
 * notebook run: from "started" to "ready" (the child running the cells);
 * pytest session and collection: the check run outside the check items. The
-  grader keeps one pytest session (:class:`autograder.checksession.CheckSession`),
+  grader keeps one pytest session (:class:`autograder.engine.checkrun.CheckSuite`),
   configured and collected in the warm-up submission, so this is what each run
   adds around the items (module globals put back, the plugin pointed at the
   submission, sys.path and sys.modules set and cleared); before that session, it
   was a whole ``pytest.main`` per submission (configuration, plugins, importing
   and collecting the checks);
 * checks: the check items, with the child's time answering their calls;
-* sweep: killing the child and sweeping the slot (:func:`autograder.session.kill_child`
-  and :func:`~autograder.session.sweep_slot`), most of whose wall time is the
+* sweep: killing the child and sweeping the slot (:func:`autograder.engine.slot.kill_child`
+  and :func:`~autograder.engine.slot.sweep_slot`), most of whose wall time is the
   killed child's own exit;
 * other: the rest of ``Grader.grade`` (reading the notebook, results).
 
@@ -53,9 +53,15 @@ sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
 
 import pytest  # noqa: E402
 
-from autograder import checksession, grading, session, staticscan  # noqa: E402
-from autograder.assignment import load_assignment  # noqa: E402
-from autograder.cputime import process_cpu_seconds  # noqa: E402
+from autograder.engine import checkrun  # noqa: E402
+
+from autograder.engine import grader  # noqa: E402
+
+from autograder.engine import slot  # noqa: E402
+
+from autograder.engine import staticscan  # noqa: E402
+from autograder.engine.assignment import load_assignment  # noqa: E402
+from autograder.sandbox.cputime import process_cpu_seconds  # noqa: E402
 
 HULL = ROOT / "assignments" / "hull"
 #: the last commit before the sweep (issue 14, issue 9) and scan changes
@@ -160,9 +166,9 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
         return report
     staticscan.scan = scan
 
-    spawn, wait = session.StudentSession._spawn, session.StudentSession._await
+    spawn, wait = slot.StudentProcess._spawn, slot.StudentProcess._await
 
-    def spawn_child(self: session.StudentSession) -> None:
+    def spawn_child(self: slot.StudentProcess) -> None:
         warm = self.slot.warm_parent
         warm_before = process_cpu_seconds(warm) if warm else 0.0
         wall, cpu = time.perf_counter(), time.process_time()
@@ -170,7 +176,7 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
         fork = process_cpu_seconds(self.slot.warm_parent or 0) - warm_before  # its fork()
         current().spawned = (wall, cpu, max(0.0, fork))
 
-    def await_message(self: session.StudentSession, *args: Any) -> Any:
+    def await_message(self: slot.StudentProcess, *args: Any) -> Any:
         message = wait(self, *args)
         op = message.get("op") if isinstance(message, dict) else None
         probe = current()
@@ -185,9 +191,9 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
             probe.add("notebook run", time.perf_counter() - probe.child.pop("mark"), 0.0,
                       probe.child["ready"] - probe.child.get("started", 0.0))
         return message
-    session.StudentSession._spawn, session.StudentSession._await = spawn_child, await_message
+    slot.StudentProcess._spawn, slot.StudentProcess._await = spawn_child, await_message
 
-    kill_child, sweep_slot = session.kill_child, session.sweep_slot
+    kill_child, sweep_slot = slot.kill_child, slot.sweep_slot
 
     def kill(pid: int, pidfd: int | None) -> None:
         if before is not None and old_sweep():
@@ -207,15 +213,15 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
             before["session"].sweep_slot(policy, slot, warm_parent)
         else:
             sweep_slot(policy, slot, warm_parent, child)
-    session.kill_child = read_then_kill
-    session.sweep_slot = timed(current, "sweep", sweep)
+    slot.kill_child = read_then_kill
+    slot.sweep_slot = timed(current, "sweep", sweep)
 
-    prepare = checksession._prepareconfig
+    prepare = checkrun._prepareconfig
 
     def prepareconfig(args: Any, plugins: Any = None) -> Any:
         return prepare(args, plugins=[*(plugins or []), PytestTimer(current)])
-    checksession._prepareconfig = prepareconfig
-    grading.CheckSession.run = timed(current, "pytest", grading.CheckSession.run)
+    checkrun._prepareconfig = prepareconfig
+    grader.CheckSuite.run = timed(current, "pytest", grader.CheckSuite.run)
 
 
 def median_ms(values: list[float]) -> float:
@@ -258,13 +264,13 @@ def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
             ) -> list[tuple[Probe, bool, float, float]]:
     """Grade ``count`` of ``examples`` in turn with one grader, after one warm-up submission."""
     rows: list[tuple[Probe, bool, float, float]] = []
-    with grading.Grader(load_assignment(folder)) as grader:
-        grader.grade(examples[0])  # warm-up: starts the worker
+    with grader.Grader(load_assignment(folder)) as graded_by:
+        graded_by.grade(examples[0])  # warm-up: starts the worker
         scan_pairs.clear()
         for index in range(count):
             probes.append(Probe())
             wall, cpu = time.perf_counter(), time.process_time()
-            grader.grade(examples[index % len(examples)])
+            graded_by.grade(examples[index % len(examples)])
             rows.append((probes[-1], old_sweep(), time.perf_counter() - wall,
                          time.process_time() - cpu))
     return rows

@@ -33,8 +33,8 @@ def example_code(path: Path) -> str:
 
 def build_batch(folder: Path, count: int) -> list[Path]:
     """``count`` submissions laid out as nbgrader expects: ``<student>/hull/hull.ipynb``."""
-    from autograder.assignment import load_assignment
-    from autograder.release import student_template
+    from autograder.authoring.release import student_template
+    from autograder.engine.assignment import load_assignment
 
     template = student_template(load_assignment(HULL))
     examples = sorted((HULL / "examples").glob("*.ipynb"))

@@ -9,7 +9,7 @@ covered folders, the slot's cgroup, the seccomp filters, the shared Landlock rul
 time and its exit, from ``RUSAGE_CHILDREN``) of
 
 * a bare fork (the peer: the child exits at once);
-* the whole sandbox (:func:`autograder.sandbox.enter_sandbox` with the default
+* the whole sandbox (:func:`autograder.sandbox.confine.enter_sandbox` with the default
   policy), first with a network namespace made by each child, then as the worker
   runs it (one empty namespace made once by the parent, as root), then with one part
   turned off by policy at a time, so that each part's cost is the difference from
@@ -48,7 +48,9 @@ import numpy  # noqa: E402,F401
 import scipy.interpolate  # noqa: E402,F401
 import scipy.spatial  # noqa: E402,F401
 
-from autograder import sandbox, syscalls  # noqa: E402
+from autograder.sandbox import confine  # noqa: E402
+
+from autograder.sandbox import seccomp  # noqa: E402
 from autograder.worker import execute  # noqa: E402
 
 CELL = "def double(x):\n    return 2 * x\n"
@@ -102,9 +104,9 @@ def measure(count: int, root: Path) -> int:
     exclude = [ROOT]
     shell = execute.make_shell()
     execute.warm_up(shell)
-    sandbox.prime_caches()
-    syscalls.prepare_filters()
-    whole = sandbox.IsolationPolicy()
+    confine.prime_caches()
+    seccomp.prepare_filters()
+    whole = confine.IsolationPolicy()
     print(f"load average {os.getloadavg()[0]:.2f}; uid {os.geteuid()}; {count} children "
           "per line; ms per child (busy: the whole machine's, counted until 0.5 s after the last)")
     print(f"  {'child':<36} {'CPU':>7} {'busy':>7} {'CPU ratio':>10}")
@@ -112,15 +114,15 @@ def measure(count: int, root: Path) -> int:
     bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
 
-    def line(label: str, policy: sandbox.IsolationPolicy, *, with_cell: bool = False) -> None:
+    def line(label: str, policy: confine.IsolationPolicy, *, with_cell: bool = False) -> None:
         probe = Path(tempfile.mkdtemp(dir=work))
-        sandbox.coverable_folders(exclude, probe, policy)
-        sandbox.prepare_cgroup(policy, 0)
-        shared = sandbox.shared_landlock(policy, work, exclude)
+        confine.coverable_folders(exclude, probe, policy)
+        confine.prepare_cgroup(policy, 0)
+        shared = confine.shared_landlock(policy, work, exclude)
         os.rmdir(probe)
 
         def enter(workdir: Path) -> None:
-            sandbox.enter_sandbox(policy, workdir, slot=0, exclude=exclude, shared=shared)
+            confine.enter_sandbox(policy, workdir, slot=0, exclude=exclude, shared=shared)
 
         def enter_and_run(workdir: Path) -> None:
             enter(workdir)
@@ -137,7 +139,7 @@ def measure(count: int, root: Path) -> int:
 
     # Before the parent moves into the slot's empty network namespace, each child makes its own.
     line("whole, a network namespace per child", whole)
-    sandbox.prepare_network(whole)  # once, as the worker does: the children share it
+    confine.prepare_network(whole)  # once, as the worker does: the children share it
     line("whole sandbox", whole, with_cell=True)
     for part, setting in (("namespaces", "namespaces"), ("network namespace", "network_namespace"),
                           ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),

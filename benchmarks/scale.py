@@ -3,7 +3,7 @@
 Usage: ``python benchmarks/scale.py [--count 1000] [--window 100]``.
 
 Grades ``count`` submissions of a trivial assignment (one cell, one check; the one
-``engine_vs_peers.py`` builds) with one :class:`autograder.grading.Grader`, as a
+``engine_vs_peers.py`` builds) with one :class:`autograder.engine.grader.Grader`, as a
 batch of that size does on one slot, and prints for every ``window`` submissions:
 
 * CPU milliseconds per submission of the grader (this process) and of the worker
@@ -34,8 +34,8 @@ import psutil
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from engine_vs_peers import write_trivial  # noqa: E402
 
-from autograder.assignment import load_assignment  # noqa: E402
-from autograder.grading import Grader  # noqa: E402
+from autograder.engine.assignment import load_assignment  # noqa: E402
+from autograder.engine.grader import Grader  # noqa: E402
 
 MIB = 1 << 20
 

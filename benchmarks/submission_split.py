@@ -2,7 +2,7 @@
 
 Usage: ``python benchmarks/submission_split.py [--count 300] [--hull]``.
 
-Grades ``count`` submissions with one :class:`autograder.grading.Grader` (after 20
+Grades ``count`` submissions with one :class:`autograder.engine.grader.Grader` (after 20
 not counted), on the one-cell, one-check assignment of ``engine_vs_peers.py`` or,
 with ``--hull``, on the hull examples with every check, and prints per submission:
 
@@ -35,10 +35,10 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from engine_vs_peers import HULL, run_floor, write_trivial  # noqa: E402
 
-from autograder import session  # noqa: E402
-from autograder.assignment import load_assignment  # noqa: E402
-from autograder.batch import grade_one  # noqa: E402
-from autograder.grading import Grader  # noqa: E402
+from autograder.engine import slot  # noqa: E402
+from autograder.engine.assignment import load_assignment  # noqa: E402
+from autograder.runners.batch import grade_one  # noqa: E402
+from autograder.engine.grader import Grader  # noqa: E402
 
 TICK = os.sysconf("SC_CLK_TCK")
 
@@ -60,7 +60,7 @@ def reaped_children_ms(pid: int) -> float:
 
 def record_child_marks(marks: dict[str, list[float]]) -> None:
     """Read the child's CPU at its "started" and "ready" messages and before its kill."""
-    receive, kill = session.StudentSession._await, session.StudentSession._kill
+    receive, kill = slot.StudentProcess._await, slot.StudentProcess._kill
 
     def on_message(self: Any, *args: Any, **kwargs: Any) -> Any:
         message = receive(self, *args, **kwargs)
@@ -76,8 +76,8 @@ def record_child_marks(marks: dict[str, list[float]]) -> None:
             marks["kill"].append(value)
         kill(self)
 
-    session.StudentSession._await = on_message  # type: ignore[method-assign]
-    session.StudentSession._kill = on_kill  # type: ignore[method-assign]
+    slot.StudentProcess._await = on_message  # type: ignore[method-assign]
+    slot.StudentProcess._kill = on_kill  # type: ignore[method-assign]
 
 
 def main() -> None:

@@ -30,14 +30,14 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from autograder.errors import UploadRejected
-from autograder.feedback import FEEDBACK_NAME
+from autograder.results.feedback import FEEDBACK_NAME
+from autograder.results.summary import render_summary, summarise
 from autograder.service import auth, gradebook, jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.intake import accept
 from autograder.service.models import Extension, Job, Submission, User, utcnow
 from autograder.service.standing import class_standings, final_score, standing, time_left
 from autograder.service.storage import Storage
-from autograder.summary import render_summary, summarise
 
 HERE = Path(__file__).resolve().parent
 SESSION_COOKIE = "ag_session"

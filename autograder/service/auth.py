@@ -15,7 +15,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from autograder.errors import UsageError
-from autograder.service.models import User, WebSession
+from autograder.service.models import BrowserLogin, User
 
 ROLES = ("student", "ta", "instructor")
 STAFF = ("ta", "instructor")
@@ -49,7 +49,7 @@ class SignedIn:
 def open_session(session: Session, user: User) -> str:
     """Start a browser session for ``user``; return the cookie value."""
     cookie = secrets.token_urlsafe(32)
-    session.add(WebSession(id_hash=token_hash(cookie), user_id=user.id,
+    session.add(BrowserLogin(id_hash=token_hash(cookie), user_id=user.id,
                            csrf=secrets.token_urlsafe(24)))
     return cookie
 
@@ -57,7 +57,7 @@ def open_session(session: Session, user: User) -> str:
 def find_session(session: Session, cookie: str | None) -> SignedIn | None:
     if not cookie or len(cookie) > 200:
         return None
-    row = session.get(WebSession, token_hash(cookie))
+    row = session.get(BrowserLogin, token_hash(cookie))
     if row is None:
         return None
     user = session.get(User, row.user_id)
@@ -66,7 +66,7 @@ def find_session(session: Session, cookie: str | None) -> SignedIn | None:
 
 def close_session(session: Session, cookie: str | None) -> None:
     if cookie:
-        row = session.get(WebSession, token_hash(cookie))
+        row = session.get(BrowserLogin, token_hash(cookie))
         if row is not None:
             session.delete(row)
 

@@ -3,12 +3,12 @@
 One process, started by :mod:`autograder.service.pool` and tied to the
 service's life like a grading process, takes the place of the local graders.
 It claims jobs from the same database queue, sends each submission's bytes to
-the cluster through the Dask backend (:class:`~autograder.backends.dask_cluster.GradingStream`:
-one :class:`~autograder.backends.dask_cluster.GradingSlots` per assignment
-bundle, :func:`~autograder.backends.dask_cluster.grade_task`), and keeps at
+the cluster through the Dask backend (:class:`~autograder.runners.dask_cluster.GradingStream`:
+one :class:`~autograder.runners.dask_cluster.GradingSlots` per assignment
+bundle, :func:`~autograder.runners.dask_cluster.grade_task`), and keeps at
 most as many jobs out as the cluster has grading slots. One thread renews the
 lease of every job that is out. Each result is written into the job's result
-folder as :func:`autograder.service.workers.grade_job` writes it and recorded
+folder as :func:`autograder.service.graders.grade_job` writes it and recorded
 with :func:`autograder.service.jobqueue.finish`.
 
 An engine failure (the scheduler unreachable or gone, a worker lost, workers
@@ -31,21 +31,19 @@ from typing import Any
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
-from autograder.assignment import Assignment, load_assignment
-from autograder.backends import load_dask_backend
-from autograder.batch import client_key, error_result
+from autograder.engine.assignment import Assignment, load_assignment
+from autograder.engine.grader import GradingOptions, client_key, error_result
 from autograder.errors import EngineError
-from autograder.feedback import write_feedback
-from autograder.grading import GradingOptions
-from autograder.report import write_result
-from autograder.results import SubmissionResult
+from autograder.results.model import SubmissionResult
+from autograder.results.store import write_submission
+from autograder.runners.backends import load_dask_backend
 from autograder.service import jobqueue
 from autograder.service.course import load_course
 from autograder.service.db import make_engine, sessions
+from autograder.service.graders import engine_error, load_submission
 from autograder.service.models import Submission
-from autograder.service.pool import WorkerSettings
+from autograder.service.settings import GraderSettings
 from autograder.service.storage import Storage
-from autograder.service.workers import engine_error, load_submission
 
 log = logging.getLogger("autograder.service.dispatch")
 
@@ -113,7 +111,7 @@ class _Leases:
 class Dispatcher:
     """Claims jobs, keeps up to one per grading slot out on the cluster, records results."""
 
-    def __init__(self, settings: WorkerSettings, name: str) -> None:
+    def __init__(self, settings: GraderSettings, name: str) -> None:
         assert settings.dask is not None
         self.settings = settings
         self.name = name
@@ -267,13 +265,12 @@ class Dispatcher:
     def _record(self, flight: _Flight, result: SubmissionResult) -> None:
         """Write ``results.json`` and the feedback page as a local grader does; finish the job."""
         folder = self._folder(flight)
-        write_result(folder, result)
-        write_feedback(folder, result, title=flight.title)
+        write_submission(folder, result, title=flight.title)
         jobqueue.finish(self.factory, flight.job, result, str(folder.relative_to(self.storage.root)),
                         worker=f"{self.name} (dask)", max_tries=self.course.max_tries)
         self.leases.release(flight.job)
 
 
-def dispatcher_main(settings: WorkerSettings, stop: Any, name: str, parent: int) -> None:
-    """The loop of the dispatcher process (started through :func:`autograder.service.pool.worker_entry`)."""
+def dispatcher_main(settings: GraderSettings, stop: Any, name: str, parent: int) -> None:
+    """The loop of the dispatcher process (started through :func:`autograder.service.pool.grader_entry`)."""
     Dispatcher(settings, name).run(stop, parent)

@@ -8,8 +8,8 @@ import json
 import zipfile
 from typing import Sequence
 
-from autograder.exports import junit_xml
-from autograder.results import SubmissionResult
+from autograder.results.exports import junit_xml
+from autograder.results.model import SubmissionResult
 from autograder.service.course import AssignmentPolicy
 from autograder.service.models import User
 from autograder.service.standing import Standing

@@ -13,8 +13,8 @@ from pathlib import Path
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from autograder.engine.notebook import parse_notebook
 from autograder.errors import NotebookError, UploadRejected
-from autograder.notebook import parse_notebook
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow

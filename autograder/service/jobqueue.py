@@ -19,11 +19,11 @@ from dataclasses import dataclass
 from sqlalchemy import select, text, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from autograder.results import SubmissionResult
+from autograder.results.model import SubmissionResult
 from autograder.service.models import Grading, Job, Submission, utcnow
 
 #: seconds a claim lasts without renewal; a grader renews it every third of that
-from autograder.service.pool import LEASE_SECONDS  # noqa: F401  (re-exported)
+from autograder.service.settings import LEASE_SECONDS
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ class User(Base):
     token_hash: Mapped[str | None] = mapped_column(String(64), unique=True, nullable=True)
 
 
-class WebSession(Base):
+class BrowserLogin(Base):
     """A signed-in browser: the cookie holds a random id, the table its hash and CSRF token."""
 
     __tablename__ = "web_sessions"

@@ -21,29 +21,11 @@ import os
 import signal
 import threading
 import time
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from autograder.backends import DaskSpec
+from autograder.service.settings import GraderSettings
 
 _PR_SET_PDEATHSIG = 1
-#: seconds a claim lasts without renewal (the default of ``--lease``)
-LEASE_SECONDS = 30.0
-
-
-@dataclass(frozen=True)
-class WorkerSettings:
-    """What a grading process needs (picklable: it crosses a ``spawn``)."""
-
-    course_path: str
-    database_url: str
-    lease_seconds: float = LEASE_SECONDS
-    poll_seconds: float = 0.2
-    #: grade on this Dask cluster: the pool then runs one dispatcher instead of graders
-    dask: "DaskSpec | None" = None
-
-
 def _ask_kernel_to_kill_us() -> None:
     try:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
@@ -57,7 +39,7 @@ def _watch(parent: int) -> None:
     os._exit(1)  # the warm workers die with us (their own PR_SET_PDEATHSIG)
 
 
-def worker_entry(settings: WorkerSettings, stop: Any, name: str, parent: int) -> None:
+def grader_entry(settings: GraderSettings, stop: Any, name: str, parent: int) -> None:
     """The target of a grading process: tie it to ``parent``, then run the grading loop
     (or, with ``settings.dask``, the dispatcher's: :mod:`autograder.service.dispatch`)."""
     _ask_kernel_to_kill_us()
@@ -70,9 +52,9 @@ def worker_entry(settings: WorkerSettings, stop: Any, name: str, parent: int) ->
 
         dispatcher_main(settings, stop, name, parent)
         return
-    from autograder.service.workers import worker_main
+    from autograder.service.graders import grader_main
 
-    worker_main(settings, stop, name, parent)
+    grader_main(settings, stop, name, parent)
 
 
 class GradingPool:
@@ -81,7 +63,7 @@ class GradingPool:
     With ``settings.dask``, give ``jobs=1``: one dispatcher sends the jobs to the cluster.
     """
 
-    def __init__(self, settings: WorkerSettings, jobs: int) -> None:
+    def __init__(self, settings: GraderSettings, jobs: int) -> None:
         self.settings = settings
         self.jobs = jobs
         self._context = multiprocessing.get_context("spawn")
@@ -98,7 +80,7 @@ class GradingPool:
         # A dispatcher of a ``local:N`` cluster starts processes of its own, which a daemonic
         # process may not; stop() ends it either way, and the kernel does if the service dies.
         proc = self._context.Process(
-            target=worker_entry, name=f"grader-{index}", daemon=self.settings.dask is None,
+            target=grader_entry, name=f"grader-{index}", daemon=self.settings.dask is None,
             args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid()))
         proc.start()
         return proc

@@ -9,14 +9,16 @@ from pathlib import Path
 
 from sqlalchemy import func, select
 
-from autograder.assignment import load_assignment
-from autograder.backends import DaskSpec, load_dask_backend
+from autograder.engine.assignment import load_assignment
 from autograder.errors import UsageError
+from autograder.runners.backends import load_dask_backend
+from autograder.runners.jobs import DaskSpec
 from autograder.service import auth
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions, upgrade
 from autograder.service.models import User
-from autograder.service.pool import GradingPool, WorkerSettings
+from autograder.service.pool import GradingPool
+from autograder.service.settings import GraderSettings
 
 
 def open_course(course_path: str | Path, *, database: str | None = None) -> Course:
@@ -74,7 +76,7 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
           say: bool = True) -> None:
     """Run the service until interrupted (see ``autograder serve --help``).
 
-    ``dask`` (a :class:`~autograder.backends.DaskSpec`, or an address such as
+    ``dask`` (a :class:`~autograder.runners.backends.DaskSpec`, or an address such as
     ``"local:2"``) grades on a Dask cluster through one dispatcher process
     instead of ``jobs`` local grading processes; it needs the ``dask`` extra.
     """
@@ -100,7 +102,7 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
         if say:
             print(f"Imported {count} people from {course.roster}; their access tokens are in "
                   f"{tokens} (only there: the database keeps hashes).", flush=True)
-    settings = WorkerSettings(course_path=str(course.path), database_url=course.database_url,
+    settings = GraderSettings(course_path=str(course.path), database_url=course.database_url,
                               dask=spec, **({"lease_seconds": lease_seconds} if lease_seconds else {}))
     pool = GradingPool(settings, 1 if spec is not None else jobs or max(1, (os.cpu_count() or 2)))
     pool.start()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from autograder.report import atomic_write_bytes
+from autograder.results.files import atomic_write_bytes
 
 
 class Storage:

@@ -6,7 +6,7 @@ worker slot; each submission then costs a ``fork()``. The standard library's
 ``multiprocessing`` forkserver does the same trick but sends pickles both ways,
 which the trust boundary forbids, so this small loop is written by hand.
 
-Control messages (JSON frames from :mod:`autograder.protocol`):
+Control messages (JSON frames from :mod:`autograder.boundary.protocol`):
 
 * grader -> parent ``{"op": "spawn", ...}`` followed by one file descriptor
   (the submission's socket, sent with ``SCM_RIGHTS``);
@@ -61,15 +61,23 @@ matplotlib.use("Agg")
 import matplotlib.pyplot  # noqa: E402,F401
 import matplotlib.tri  # noqa: E402,F401
 
-from autograder import protocol, sandbox, syscalls  # noqa: E402
-from autograder.worker import execute, figures, guard, hugepages, serve  # noqa: E402
+from autograder.boundary import protocol  # noqa: E402
+
+from autograder.sandbox import confine  # noqa: E402
+
+from autograder.sandbox import seccomp  # noqa: E402
+from autograder.worker import execute  # noqa: E402
+from autograder.worker import figures  # noqa: E402
+from autograder.worker import guard  # noqa: E402
+from autograder.worker import hugepages  # noqa: E402
+from autograder.worker import loop  # noqa: E402
 
 def _adopt_orphans() -> None:
     """Become the child subreaper: whatever a submission leaves behind stays below us.
 
     A grader that is not root has neither a user nor a cgroup per slot; it finds a
     submission's processes as the descendants of this process
-    (:func:`autograder.session.kill_descendants`), even those whose parent died.
+    (:func:`autograder.engine.slot.kill_descendants`), even those whose parent died.
     """
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -88,15 +96,15 @@ def _reap(signum: int, frame: Any) -> None:
             return
 
 
-def _policy(spec: dict[str, Any]) -> sandbox.IsolationPolicy:
-    limits = sandbox.Limits(**spec.get("limits", {}))
+def _policy(spec: dict[str, Any]) -> confine.IsolationPolicy:
+    limits = confine.Limits(**spec.get("limits", {}))
     rest: dict[str, Any] = {k: (tuple(v) if isinstance(v, list) else v)
                             for k, v in spec.items() if k != "limits"}
-    return sandbox.IsolationPolicy(limits=limits, **rest)
+    return confine.IsolationPolicy(limits=limits, **rest)
 
 
 def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingShell,
-           shared: sandbox.SharedLandlock | None) -> None:
+           shared: confine.SharedLandlock | None) -> None:
     """Enter the sandbox, run the cells, then serve calls. Never returns."""
     code = 0
     try:
@@ -104,7 +112,7 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         policy = _policy(request["policy"])
         workdir = Path(request["workdir"])
         _quiet_standard_streams()
-        notes = sandbox.enter_sandbox(policy, workdir, slot=int(request["slot"]),
+        notes = confine.enter_sandbox(policy, workdir, slot=int(request["slot"]),
                                       exclude=[Path(p) for p in request.get("exclude", [])],
                                       shared=shared)
         if shared is not None:  # enforced (and closed) above unless another was needed
@@ -125,9 +133,9 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
             "op": "ready",
             "cells": [o.to_wire() for o in run.outcomes],
             "stdout": output.take(),
-            "functions": serve.defined_functions(shell),
+            "functions": loop.defined_functions(shell),
         })
-        serve.serve(sock, shell, output)
+        loop.serve(sock, shell, output)
     except BaseException:  # the child must never fall back into the parent's loop
         code = 70
     finally:
@@ -137,13 +145,13 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
 #: the forbid list the warm parent applied to itself (inherited by every child)
 _APPLIED: list[str | None] = [None]
 #: the Landlock ruleset built once for every child (rebuilt if the settings change)
-_SHARED: list[sandbox.SharedLandlock | None] = [None]
+_SHARED: list[confine.SharedLandlock | None] = [None]
 #: children forked so far
 _FORKED: list[int] = [0]
 
 
-def _shared_landlock(request: dict[str, Any], policy: sandbox.IsolationPolicy, workdir: Path,
-                     exclude: list[Path]) -> sandbox.SharedLandlock | None:
+def _shared_landlock(request: dict[str, Any], policy: confine.IsolationPolicy, workdir: Path,
+                     exclude: list[Path]) -> confine.SharedLandlock | None:
     """The ruleset for this request's child, built here once for the slot's work root.
 
     None when the grader named no work root, or one ``workdir`` is not directly in
@@ -156,7 +164,7 @@ def _shared_landlock(request: dict[str, Any], policy: sandbox.IsolationPolicy, w
     if current is None or not current.serves(policy, workdir, exclude):
         if current is not None:
             current.close()
-        current = _SHARED[0] = sandbox.shared_landlock(policy, Path(root), exclude)
+        current = _SHARED[0] = confine.shared_landlock(policy, Path(root), exclude)
     return current
 
 
@@ -240,9 +248,9 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     # are found from the readable paths, which this fills the cache with too.
     policy, workdir = _policy(request["policy"]), Path(request["workdir"])
     exclude = [Path(p) for p in request.get("exclude", [])]
-    sandbox.coverable_folders(exclude, workdir, policy)
-    sandbox.prepare_cgroup(policy, int(request["slot"]))
-    sandbox.prepare_network(policy)
+    confine.coverable_folders(exclude, workdir, policy)
+    confine.prepare_cgroup(policy, int(request["slot"]))
+    confine.prepare_network(policy)
     _probes()
     shared = _shared_landlock(request, policy, workdir, exclude)
     # Everything this process made moves to the collector's permanent generation: the
@@ -270,8 +278,8 @@ def main(argv: list[str] | None = None) -> int:
     shell = execute.make_shell()
     execute.warm_up(shell)
     figures.close_all()
-    sandbox.prime_caches()
-    syscalls.prepare_filters()
+    confine.prime_caches()
+    seccomp.prepare_filters()
     signal.signal(signal.SIGCHLD, _reap)
     protocol.send_message(control, {"op": "hello", "pid": os.getpid(),
                                     "python": sys.version.split()[0], "time": time.time()})

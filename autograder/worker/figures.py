@@ -4,7 +4,7 @@ Checks cannot hold a student's ``Figure`` (it would have to be unpickled in
 the grader), so the worker reads what a check may want to compare out of the
 figure: line data, scatter offsets, collection paths (contours, tripcolor,
 fill_between), patches, images, texts, limits and labels, and renders a PNG
-for feedback. Arrays are float64 ``ndarray`` so :mod:`autograder.protocol`
+for feedback. Arrays are float64 ``ndarray`` so :mod:`autograder.boundary.protocol`
 sends them as binary buffers.
 
 Extraction runs over student artists: every artist (and every axes field) is
@@ -140,7 +140,7 @@ def open_figures_data(
     return data
 
 
-#: The name :mod:`autograder.worker.serve` uses.
+#: The name :mod:`autograder.worker.loop` uses.
 figures_data = open_figures_data
 
 

@@ -1,6 +1,6 @@
 """Make an assignment's forbidden libraries unreachable in the worker, whatever the spelling.
 
-The static scan (``autograder.staticscan``) names a forbidden use with a clear
+The static scan (``autograder.engine.staticscan``) names a forbidden use with a clear
 message, but names can be computed (``importlib.import_module("scipy." + "spatial")``,
 ``exec`` of a decoded string, ``vars(scipy)[...]``, a private alias inside an
 allowed module). This module enforces the rule on what runs:

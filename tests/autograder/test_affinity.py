@@ -10,11 +10,11 @@ from typing import Any
 
 import pytest
 
-from autograder import affinity
-from autograder.assignment import load_assignment
+from autograder.engine.assignment import load_assignment
+from autograder.engine.grader import Grader
+from autograder.engine.slot import StudentProcess
 from autograder.errors import UsageError
-from autograder.grading import Grader
-from autograder.session import StudentSession
+from autograder.sandbox import affinity
 from tests.support.assignments import CHECK, RIGHT, submission, write_double
 
 CORES = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
@@ -77,15 +77,15 @@ def test_a_slot_and_its_grader_thread_share_one_core_during_a_submission(
         monkeypatch.setenv(affinity.ENVIRONMENT_VARIABLE, "0")
     folder, submission = write_assignment(tmp_path)
     seen: list[dict[str, Any]] = []
-    call = StudentSession.call
+    call = StudentProcess.call
 
-    def watched(self: StudentSession, *args: Any, **kwargs: Any) -> Any:
+    def watched(self: StudentProcess, *args: Any, **kwargs: Any) -> Any:
         assert self._pid is not None and self.slot.warm_parent is not None
         seen.append({"thread": cores_of(0), "child": cores_of(self._pid),
                      "warm parent": cores_of(self.slot.warm_parent)})
         return call(self, *args, **kwargs)
 
-    monkeypatch.setattr(StudentSession, "call", watched)
+    monkeypatch.setattr(StudentProcess, "call", watched)
     before = cores_of(0)
     with Grader(load_assignment(folder)) as grader:
         core = grader._slot.core

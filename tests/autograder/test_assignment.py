@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from autograder.assignment import (
+from autograder.engine.assignment import (
     Assignment,
     Rules,
     checks_digest,

@@ -9,10 +9,17 @@ from pathlib import Path
 
 import pytest
 
-from autograder.batch import RESERVED_NAMES, Shard, assign_ids, collect_submissions, place_name
 from autograder.errors import UsageError
-from autograder.report import atomic_write_text, grades_csv, read_result, write_result
-from autograder.results import CheckResult, SubmissionResult
+from autograder.results.files import atomic_write_text
+from autograder.results.model import CheckResult, SubmissionResult
+from autograder.results.store import grades_csv, read_result, write_result
+from autograder.runners.batch import (
+    RESERVED_NAMES,
+    Shard,
+    assign_ids,
+    collect_submissions,
+    place_name,
+)
 
 
 def test_nbgrader_layout_gets_student_ids() -> None:
@@ -116,10 +123,10 @@ def test_results_round_trip_in_gradescope_format(tmp_path: Path) -> None:
 def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.MonkeyPatch,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     from autograder import cli
-    from autograder.sandbox import IsolationSupport
+    from autograder.sandbox.confine import IsolationSupport
 
     note = "Landlock is not available (kernel ABI 0): file and network restrictions are off."
-    monkeypatch.setattr("autograder.sandbox.probe_support",
+    monkeypatch.setattr("autograder.sandbox.confine.probe_support",
                         lambda: IsolationSupport(landlock_abi=0, is_root=True,
                                                  can_unshare_net=True, notes=(note,)))
     monkeypatch.setattr(cli, "_check", lambda args: 0)
@@ -138,7 +145,7 @@ def class_folder(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path], 
     import shutil
 
     from autograder import api
-    from autograder.grading import GradingOptions
+    from autograder.engine.grader import GradingOptions
 
     subs = tmp_path_factory.mktemp("subs")
     for source in (ROOT / "assignments/hull/examples/solution.ipynb",
@@ -153,7 +160,7 @@ def class_folder(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path], 
 @pytest.mark.slow
 def test_shards_merged_equal_the_whole_run(class_folder: tuple[list[Path], Path], tmp_path: Path) -> None:
     from autograder import api
-    from autograder.grading import GradingOptions
+    from autograder.engine.grader import GradingOptions
 
     subs, whole = class_folder
     folders = []
@@ -179,7 +186,7 @@ def test_one_late_file_into_the_class_folder_keeps_every_row(class_folder: tuple
     import shutil
 
     from autograder import api
-    from autograder.grading import GradingOptions
+    from autograder.engine.grader import GradingOptions
 
     subs, whole = class_folder
     out = tmp_path / "class"

@@ -15,12 +15,11 @@ import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
-
 import numpy as np
 import pytest
 
-from autograder.feedback import write_feedback
-from autograder.results import Attachment, CellError, CheckResult, SubmissionResult
+from autograder.results.feedback import write_feedback
+from autograder.results.model import Attachment, CellError, CheckResult, SubmissionResult
 from tests.support.webdriver import CHROMEDRIVER, CHROMIUM, WebDriver, start_chromedriver
 
 pytestmark = pytest.mark.browser

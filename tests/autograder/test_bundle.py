@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from autograder.assignment import load_assignment
-from autograder.bundle import Bundle, make_bundle
+from autograder.engine.assignment import load_assignment
 from autograder.errors import AssignmentError
+from autograder.runners.bundle import Bundle, make_bundle
 
 
 def test_a_bundle_unpacks_to_the_same_files(tmp_path: Path) -> None:

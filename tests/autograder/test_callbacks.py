@@ -12,12 +12,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from autograder import callbacks
-from autograder.callbacks import traced
+from autograder.engine import callbacks
+from autograder.engine.callbacks import traced
+from autograder.engine.proxy import CallLog, Student, StudentFunction
+from autograder.engine.slot import GradingSlot, StudentProcess
 from autograder.errors import CallTimeout, StudentException, UsageError
-from autograder.proxy import CallLog, Student, StudentFunction
-from autograder.sandbox import IsolationPolicy
-from autograder.session import StudentSession, WorkerSlot
+from autograder.sandbox.confine import IsolationPolicy
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="the worker needs Linux (fork)")
 
@@ -79,14 +79,14 @@ def sum_points(f, xs):
 
 
 @pytest.fixture(scope="module")
-def slot() -> Iterator[WorkerSlot]:
-    with WorkerSlot() as worker:
+def slot() -> Iterator[GradingSlot]:
+    with GradingSlot() as worker:
         yield worker
 
 
 @pytest.fixture
-def student(slot: WorkerSlot) -> Iterator[Student]:
-    session = StudentSession(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
+def student(slot: GradingSlot) -> Iterator[Student]:
+    session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
                              policy=IsolationPolicy(), notebook_timeout=60)
     report = session.start()
     assert all(cell.ok for cell in report.cells), report.cells

@@ -1,4 +1,4 @@
-"""Tests of :mod:`autograder.cgroups` and of the sweeps that end a slot's processes.
+"""Tests of :mod:`autograder.sandbox.cgroups` and of the sweeps that end a slot's processes.
 
 The "hydra" below re-forks itself in a new session as fast as it can, so its pid
 changes all the time: a sweep that lists ``/proc`` and then kills what it listed
@@ -20,9 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from autograder import cgroups
-from autograder.sandbox import IsolationPolicy, enter_sandbox, probe_support
-from autograder.session import (
+from autograder.engine.slot import (
     _kill_listed,
     _proc_stat,
     child_pidfd,
@@ -32,6 +30,8 @@ from autograder.session import (
     kill_user,
     slot_lock_dir,
 )
+from autograder.sandbox import cgroups
+from autograder.sandbox.confine import IsolationPolicy, enter_sandbox, probe_support
 
 # Slots claimed like a grader's, held while the tests run: a grader running at the
 # same time never uses (or sweeps) their user ids and cgroups.

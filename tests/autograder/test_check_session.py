@@ -14,10 +14,10 @@ from typing import Iterator
 
 import pytest
 
-from autograder.assignment import load_assignment
+from autograder.engine.assignment import load_assignment
+from autograder.engine.grader import Grader
 from autograder.errors import AssignmentError, EngineError
-from autograder.grading import Grader
-from autograder.results import SubmissionResult
+from autograder.results.model import SubmissionResult
 from tests.support.assignments import RIGHT, submission, write_double
 
 HELPER = '''

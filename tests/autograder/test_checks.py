@@ -61,7 +61,7 @@ def test_every_public_name_is_exported_and_documented():
 
 
 def test_check_failure_is_in_compare_all():
-    import autograder.compare as compare
+    import autograder.checks.compare_arrays as compare
 
     assert "CheckFailure" in compare.__all__
     assert issubclass(CheckFailure, AssertionError)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from autograder.tempdirs import GRACE_SECONDS, LOCK_NAME
+from autograder.sandbox.tempdirs import GRACE_SECONDS, LOCK_NAME
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "assignments" / "hull" / "examples"

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from autograder.cputime import CpuClock, process_cpu_seconds
+from autograder.sandbox.cputime import CpuClock, process_cpu_seconds
 
 pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/stat"),
                                 reason="needs Linux's /proc (the clock reads /proc/<pid>/stat)")

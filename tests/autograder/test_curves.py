@@ -1,4 +1,4 @@
-"""Tests of autograder.curves: drawn points from figure data, Hausdorff distances,
+"""Tests of autograder.checks.compare_curves: drawn points from figure data, Hausdorff distances,
 and the side-by-side picture. Figure data is built by hand (the format of
 docs/design.md), so these tests need no worker."""
 
@@ -10,13 +10,13 @@ import math
 import numpy as np
 import pytest
 
-from autograder.curves import (
+from autograder.checks.compare_curves import (
     CurveDistance,
     curve_pieces,
     curve_points,
+    decode_png,
     hausdorff,
     relative_curve_distance,
-    decode_png,
     render_side_by_side,
 )
 

@@ -15,15 +15,10 @@ from pathlib import Path
 import pytest
 
 from autograder import api, cli
-from autograder.batch import BatchReport
-from autograder.exports import (
-    ci_lines,
-    junit_xml,
-    pick_notebook,
-    points_line,
-    step_summary_markdown,
-)
-from autograder.results import CheckResult, SubmissionResult
+from autograder.authoring.gradescope import pick_notebook
+from autograder.results.exports import ci_lines, junit_xml, points_line, step_summary_markdown
+from autograder.results.model import CheckResult, SubmissionResult
+from autograder.runners.batch import BatchRun
 
 ROOT = Path(__file__).resolve().parents[2]
 HULL = ROOT / "assignments" / "hull"
@@ -83,8 +78,8 @@ def test_step_summary_is_markdown_with_untrusted_text_escaped() -> None:
 
 
 def _fake_grade(results: list[SubmissionResult]):  # type: ignore[no-untyped-def]
-    def grade(*args: object, **kwargs: object) -> BatchReport:
-        return BatchReport(results=tuple(results), graded=len(results), reused=0, seconds=0.1)
+    def grade(*args: object, **kwargs: object) -> BatchRun:
+        return BatchRun(results=tuple(results), graded=len(results), reused=0, seconds=0.1)
     return grade
 
 
@@ -158,7 +153,7 @@ def test_zip_layout(gradescope_zip: Path, tmp_path: Path) -> None:
         names = set(archive.namelist())
         modes = {i.filename: i.external_attr >> 16 for i in archive.infolist()}
     for required in ("setup.sh", "run_autograder", "pyproject.toml", "README.md",
-                     "autograder/__init__.py", "autograder/templates/feedback.html.j2",
+                     "autograder/__init__.py", "autograder/results/templates/feedback.html.j2",
                      "reference/__init__.py", "assignment/hull/assignment.toml",
                      "assignment/hull/hull.ipynb", "assignment/hull/checks/hidden/test_hull_hidden.py",
                      "assignment/hull/checks/public/test_hull_public.py"):

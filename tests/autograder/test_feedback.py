@@ -9,10 +9,11 @@ from typing import Any
 
 import pytest
 
-from autograder.batch import grade_one, refresh_feedback
-from autograder.feedback import FEEDBACK_NAME, clip, render_feedback, write_feedback
-from autograder.report import read_result, write_result
-from autograder.results import Attachment, CellError, CheckResult, SubmissionResult
+from autograder.results.feedback import FEEDBACK_NAME, clip, render_feedback, write_feedback
+from autograder.results.model import Attachment, CellError, CheckResult, SubmissionResult
+from autograder.results.store import read_result, write_result
+from autograder.results.store import refresh_feedback, write_submission
+from autograder.runners.local import grade_one
 
 PNG = base64.b64decode(  # a 1x1 PNG
     "iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg==")
@@ -117,7 +118,7 @@ def test_every_outcome_gets_a_page(tmp_path: Path, outcome: str) -> None:
 
 
 class FakeGrader:
-    """Stands in for :class:`autograder.grading.Grader` in ``grade_one``."""
+    """Stands in for :class:`autograder.engine.grader.Grader` in ``grade_one``."""
 
     class assignment:  # mimics Grader.assignment
         name = "hull"
@@ -130,8 +131,7 @@ class FakeGrader:
         if self.fail:
             raise RuntimeError("the grader broke")
         result = make_result(id=id, tests=make_result().tests[:1])
-        write_result(out_dir, result)
-        return result
+        return write_submission(out_dir, result, title=self.assignment.title)  # as Grader.grade
 
 
 @pytest.mark.parametrize("fail", [False, True])
@@ -150,9 +150,9 @@ def test_grade_one_writes_the_page_after_results(tmp_path: Path, fail: bool) -> 
 def test_reused_results_get_a_missing_page(tmp_path: Path) -> None:
     result = make_result(tests=make_result().tests[:1])
     write_result(tmp_path, result)
-    refresh_feedback(tmp_path, result, "Convex hull")
+    refresh_feedback(tmp_path, result, title="Convex hull")
     page = tmp_path / FEEDBACK_NAME
     assert page.exists()
     page.write_text("kept")
-    refresh_feedback(tmp_path, result, "Convex hull")
+    refresh_feedback(tmp_path, result, title="Convex hull")
     assert page.read_text() == "kept", "an up-to-date page is not rewritten"

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from autograder.assignment import load_assignment
-from autograder.grading import Grader
+from autograder.engine.assignment import load_assignment
+from autograder.engine.grader import Grader
 from autograder.worker import hugepages
 from tests.support.assignments import CHECK, RIGHT, submission, write_double
 

@@ -24,8 +24,8 @@ import psutil
 import pytest
 
 from autograder import api
-from autograder.backends import local
-from autograder.results import SubmissionResult
+from autograder.results.model import SubmissionResult
+from autograder.runners import local
 
 ROOT = Path(__file__).resolve().parents[2]
 SOLUTION = ROOT / "assignments" / "hull" / "examples" / "solution.ipynb"

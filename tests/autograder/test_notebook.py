@@ -9,8 +9,7 @@ import nbformat
 import pytest
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 
-from autograder.errors import NotebookError
-from autograder.notebook import (
+from autograder.engine.notebook import (
     EMPTY_NOTEBOOK_MESSAGE,
     ERROR_KINDS,
     MAX_CODE_BYTES,
@@ -21,7 +20,8 @@ from autograder.notebook import (
     parse_notebook,
     read_notebook,
 )
-from autograder.staticscan import scan
+from autograder.engine.staticscan import scan
+from autograder.errors import NotebookError
 
 FILES = Path(__file__).resolve().parents[1] / "files" / "notebooks"
 

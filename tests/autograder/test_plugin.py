@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
-from autograder.checksession import CheckSession
+from autograder.engine.checkrun import CheckSuite
+from autograder.engine.plugin import CheckContext
 from autograder.errors import CallTimeout, StudentException
-from autograder.plugin import CheckContext
 
 CHECKS = '''
 import pytest
@@ -81,7 +81,7 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         target=FakeTarget(), functions=("double", "boom", "slow", "cheat"),
         forbidden={"cheat": "`cheat` uses scipy.spatial, which is not allowed."},
         call_timeout=1.0, seed=42, hidden_root=hidden)
-    session = CheckSession([hidden / "test_demo.py"], tmp_path, name="demo", context=context)
+    session = CheckSuite([hidden / "test_demo.py"], tmp_path, name="demo", context=context)
     try:
         run = session.run(context)
     finally:

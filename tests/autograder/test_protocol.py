@@ -1,4 +1,4 @@
-"""Tests of autograder.protocol: round-trips, hostile values, forged trees, frames."""
+"""Tests of autograder.boundary.protocol: round-trips, hostile values, forged trees, frames."""
 
 from __future__ import annotations
 
@@ -20,9 +20,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from autograder import protocol
-from autograder.errors import ProtocolError
-from autograder.protocol import (
+from autograder.boundary import protocol
+from autograder.boundary.protocol import (
     MAX_DEPTH,
     MAX_STR_CHARS,
     Unsupported,
@@ -34,6 +33,7 @@ from autograder.protocol import (
     send_frame,
     send_message,
 )
+from autograder.errors import ProtocolError
 
 MiB = 2**20
 

@@ -9,9 +9,9 @@ import pytest
 from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook, new_output
 from nbgrader.utils import compute_checksum
 
-from autograder.assignment import Assignment, load_assignment
+from autograder.authoring.release import release, student_template
+from autograder.engine.assignment import Assignment, load_assignment
 from autograder.errors import AssignmentError
-from autograder.release import release, student_template
 
 SOLUTION = "    hull = sorted(points)  # the secret solution line\n"
 HIDDEN_LINE = "assert student.convex_hull([[0, 0]]) == [[0, 0]], 'hidden dataset'"

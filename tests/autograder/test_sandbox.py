@@ -1,4 +1,4 @@
-"""Tests of :mod:`autograder.sandbox`.
+"""Tests of :mod:`autograder.sandbox.confine`.
 
 Each sandbox case forks a child that enters the sandbox in a temporary working
 directory, tries one thing and reports over a pipe as JSON; the parent asserts.
@@ -26,20 +26,20 @@ from typing import Any
 
 import pytest
 
-from autograder import sandbox
+from autograder.engine.slot import claim_slot
 from autograder.errors import UsageError
-from autograder.sandbox import (
+from autograder.sandbox import confine
+from autograder.sandbox.confine import (
     IsolationPolicy,
     Limits,
+    SharedLandlock,
     clean_environment,
     coverable_folders,
-    SharedLandlock,
     enter_sandbox,
     probe_support,
     readable_paths,
     shared_landlock,
 )
-from autograder.session import claim_slot
 
 REPO = Path(__file__).resolve().parents[2]
 # Slots claimed as a grader claims them and held while the tests run: a grader running
@@ -282,16 +282,16 @@ def test_owners_of_the_hidden_packages_are_those_importlib_metadata_names() -> N
     owners = importlib.metadata.packages_distributions()
 
     def expected(packages: Sequence[str]) -> set[str]:
-        return {sandbox._normalise(d) for p in packages for d in owners.get(p, []) if d}
+        return {confine._normalise(d) for p in packages for d in owners.get(p, []) if d}
 
     importable = sorted(name for name in owners if name.isidentifier()
                         and importlib.util.find_spec(name) is not None)
     assert {"autograder", "numpy", "pytest"} <= set(importable)
-    for package in [*sandbox.HIDDEN_PACKAGES, "numpy", "scipy", "IPython", "pytest", "_pytest",
+    for package in [*confine.HIDDEN_PACKAGES, "numpy", "scipy", "IPython", "pytest", "_pytest",
                     "matplotlib", "mpl_toolkits", "nbformat", "six", "not_installed_at_all"]:
-        assert sandbox._distribution_names([package]) == expected([package]), package
-    assert sandbox._distribution_names(importable) == expected(importable)
-    assert sandbox._distribution_names(sandbox.HIDDEN_PACKAGES) >= {"numgrade"}
+        assert confine._distribution_names([package]) == expected([package]), package
+    assert confine._distribution_names(importable) == expected(importable)
+    assert confine._distribution_names(confine.HIDDEN_PACKAGES) >= {"numgrade"}
 
 
 def test_path_containment_by_components_is_pathlibs() -> None:
@@ -300,11 +300,11 @@ def test_path_containment_by_components_is_pathlibs() -> None:
                                 "/x/a/b", "/a/b/c.d")]
     for path in paths:
         for root in paths:
-            assert sandbox._within(path, root) == (path == root or root in path.parents), \
+            assert confine._within(path, root) == (path == root or root in path.parents), \
                 (path, root)
-    assert sandbox._outermost([*paths[1:], Path("/a/b"), Path("/x/a/b")]) == [
+    assert confine._outermost([*paths[1:], Path("/a/b"), Path("/x/a/b")]) == [
         Path("/a"), Path("/ab"), Path("/x/a/b")]
-    assert sandbox._outermost(paths) == [Path("/")]
+    assert confine._outermost(paths) == [Path("/")]
 
 
 def test_probe_support_is_cached_and_consistent() -> None:
@@ -552,8 +552,8 @@ def test_a_slots_children_share_one_empty_network_namespace_made_once(
     """As root the warm parent makes the empty namespace once (``prepare_network``); each
     child is born in it, and none is in the grader's."""
     require_root("moving the warm parent into a network namespace")
-    from autograder.assignment import load_assignment
-    from autograder.grading import Grader
+    from autograder.engine.assignment import load_assignment
+    from autograder.engine.grader import Grader
     from tests.support.assignments import submission, write_double
 
     record = tmp_path / "netns.txt"
@@ -696,7 +696,7 @@ def test_inherited_environment_block_is_wiped(workdir: Path) -> None:
     script = textwrap.dedent(f"""
         import json, sys
         from pathlib import Path
-        from autograder.sandbox import IsolationPolicy, enter_sandbox
+        from autograder.sandbox.confine import IsolationPolicy, enter_sandbox
         proc = Path("/proc/self/environ")
         before = "{SECRET}" in proc.read_text("latin-1")
         enter_sandbox(IsolationPolicy(), Path({str(workdir)!r}), slot={SLOTS[4]})

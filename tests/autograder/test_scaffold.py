@@ -10,10 +10,10 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from autograder.assignment import load_assignment
+from autograder.authoring.release import release
+from autograder.authoring.scaffold import new_assignment
+from autograder.engine.assignment import load_assignment
 from autograder.errors import UsageError
-from autograder.release import release
-from autograder.scaffold import new_assignment
 
 
 def test_new_writes_a_complete_assignment_folder(tmp_path: Path) -> None:

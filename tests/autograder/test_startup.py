@@ -82,15 +82,15 @@ print(json.dumps({"grammar": "rfc3987_syntax" in sys.modules and sys.modules["rf
 
 EARLY = """
 import json, sys
-from autograder import session
+from autograder.engine import slot
 from autograder.cli import main
-engine = ("pytest", "nbformat", "autograder.grading", "autograder.checksession", "reference")
+engine = ("pytest", "nbformat", "autograder.engine.grader", "autograder.engine.checkrun", "reference")
 launches = []
-launch = session.WorkerSlot._launch
+launch = slot.GradingSlot._launch
 def recording(self):
     launches.append(sorted(m for m in engine if m in sys.modules))
     launch(self)
-session.WorkerSlot._launch = recording
+slot.GradingSlot._launch = recording
 try:
     code = main(sys.argv[1:])
 except SystemExit as exc:
@@ -101,7 +101,7 @@ print(json.dumps({"code": code, "launches": launches}), file=sys.stderr)
 
 def test_grade_check_and_validate_start_the_warm_parent_before_importing_the_engine(
         tmp_path: Path) -> None:
-    """The warm parent's imports run beside the grader's (``session.start_early``); a run
+    """The warm parent's imports run beside the grader's (``slot.start_early``); a run
     that grades nothing, or fails, leaves neither its slot folder nor its process."""
     folder = write_double(tmp_path, "double", {"test_double.py": CHECK})
     notebook = submission(tmp_path / "submitted", "alice", RIGHT)

@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import ast
+
 import pytest
 
+from autograder.engine.staticscan import ScanFindings, Use, scan
 from autograder.errors import UsageError
-from autograder.staticscan import ScanReport, Use, scan
 
 SPATIAL = ["scipy.spatial"]
 SPLINE = ["scipy.interpolate.CubicSpline"]
 
 
-def where(report: ScanReport) -> list[tuple[str | None, int, int]]:
+def where(report: ScanFindings) -> list[tuple[str | None, int, int]]:
     """``(function, cell, line)`` of each use."""
     return [(u.function, u.cell, u.line) for u in report.uses]
 
@@ -265,8 +266,8 @@ def _parses(source: str) -> bool:
 
 
 def test_empty_inputs() -> None:
-    assert scan([], SPATIAL) == ScanReport()
-    assert scan(["import scipy.spatial"], []) == ScanReport()
+    assert scan([], SPATIAL) == ScanFindings()
+    assert scan(["import scipy.spatial"], []) == ScanFindings()
 
 
 def test_uses_are_sorted_and_deduplicated() -> None:
@@ -305,7 +306,7 @@ def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
 def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> None:
     from IPython.core.inputtransformer2 import TransformerManager
 
-    from autograder.staticscan import _Analyzer, _Where
+    from autograder.engine.staticscan import _Analyzer, _Where
 
     analyzer = _Analyzer(tuple(SPATIAL))
     mine = analyzer._parse(source, _Where(cell=0, lines=tuple(source.splitlines())), "")

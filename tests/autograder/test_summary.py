@@ -9,18 +9,18 @@ from pathlib import Path
 
 import pytest
 
-from autograder.assignment import load_assignment
-from autograder.batch import grade_batch
-from autograder.grading import GradingOptions, _file_sha256, submission_key
-from autograder.report import write_result
-from autograder.results import CheckResult, SubmissionResult
-from autograder.summary import (
+from autograder.engine.assignment import load_assignment
+from autograder.engine.grader import GradingOptions, _file_sha256, submission_key
+from autograder.results.model import CheckResult, SubmissionResult
+from autograder.results.store import write_result
+from autograder.results.summary import (
     histogram,
     summarise,
     suspected_hard_coding,
     unseen_checks,
     write_summary,
 )
+from autograder.runners.batch import grade_batch
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,4 +1,4 @@
-"""Tests of :mod:`autograder.syscalls`: namespaces, disk quota and the seccomp filter.
+"""Tests of :mod:`autograder.sandbox.seccomp`: namespaces, disk quota and the seccomp filter.
 
 Each case forks a child that enters the whole sandbox (:func:`enter_sandbox`) and
 tries one thing. Cases run twice when the suite runs as root: as root (the child
@@ -25,9 +25,15 @@ from typing import Any
 
 import pytest
 
-from autograder import syscalls
-from autograder.sandbox import IsolationPolicy, Limits, enter_sandbox, probe_support, readable_paths
-from autograder.session import claim_slot
+from autograder.engine.slot import claim_slot
+from autograder.sandbox import seccomp
+from autograder.sandbox.confine import (
+    IsolationPolicy,
+    Limits,
+    enter_sandbox,
+    probe_support,
+    readable_paths,
+)
 
 pyseccomp = pytest.importorskip("pyseccomp", reason="libseccomp (Debian: libseccomp2) is missing")
 
@@ -341,7 +347,7 @@ def test_private_namespaces_report_what_they_did(workdir: Path, identity: str) -
 
 
 def test_user_namespaces_allowed_is_a_bool() -> None:
-    assert isinstance(syscalls.user_namespaces_allowed(), bool)
+    assert isinstance(seccomp.user_namespaces_allowed(), bool)
 
 
 # ---------------------------------------------------------------- process group

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from autograder.session import WorkerSlot, matplotlib_folder
-from autograder.tempdirs import GRACE_SECONDS, LOCK_NAME, OwnedFolder, remove_abandoned
+from autograder.engine.slot import GradingSlot, matplotlib_folder
+from autograder.sandbox.tempdirs import GRACE_SECONDS, LOCK_NAME, OwnedFolder, remove_abandoned
 
 PREFIX = "autograder-test-"
 
@@ -83,7 +83,7 @@ def test_a_folder_of_another_user_stays(tmp_path: Path) -> None:
 def test_warm_parents_keep_one_private_matplotlib_folder() -> None:
     # Matplotlib builds its font list in MPLCONFIGDIR; a folder per slot would rebuild
     # it at every warm parent's start. One private folder per user outlives them.
-    slot = WorkerSlot(slot=0)
+    slot = GradingSlot(slot=0)
     try:
         slot.start()
         assert slot.warm_parent is not None

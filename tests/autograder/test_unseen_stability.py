@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from autograder import api
-from autograder.assignment import load_assignment
-from autograder.grading import submission_seed
+from autograder.engine.assignment import load_assignment
+from autograder.engine.grader import submission_seed
 
 ROOT = Path(__file__).resolve().parents[2]
 ASSIGNMENTS = sorted(p.parent.name for p in (ROOT / "assignments").glob("*/assignment.toml"))

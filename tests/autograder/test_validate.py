@@ -9,10 +9,16 @@ from pathlib import Path
 
 import pytest
 
-from autograder.assignment import load_assignment
-from autograder.release import release
-from autograder.scaffold import new_assignment
-from autograder.validate import ExampleCheck, ValidationReport, find_leaks, format_report, validate
+from autograder.authoring.release import release
+from autograder.authoring.scaffold import new_assignment
+from autograder.authoring.validate import (
+    ExampleCheck,
+    ValidationRun,
+    find_leaks,
+    format_report,
+    validate,
+)
+from autograder.engine.assignment import load_assignment
 
 
 @pytest.fixture
@@ -72,7 +78,7 @@ def test_a_leaking_notebook_fails_validation_before_grading(quad: Path, tmp_path
 
 
 def test_bad_bands_are_reported(quad: Path) -> None:
-    from autograder.validate import _read_bands
+    from autograder.authoring.validate import _read_bands
 
     (quad / "examples" / "expected.toml").write_text(
         "[solution]\nmin = 1\nmax = 0.5\n[other]\nmin = 0\nmax = 1\ncontains = 'x'\n")
@@ -83,7 +89,7 @@ def test_bad_bands_are_reported(quad: Path) -> None:
 
 
 def test_the_table_marks_rows_outside_their_band() -> None:
-    report = ValidationReport("quad", (
+    report = ValidationRun("quad", (
         ExampleCheck("solution", 5, 5, 1.0, 1.0, "graded"),
         ExampleCheck("wrong-x", 2, 5, 0.0, 0.2, "graded", ("scored 0.400, outside [0, 0.2]",)),
     ))

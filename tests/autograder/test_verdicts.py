@@ -20,11 +20,11 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from autograder.assignment import load_assignment
+from autograder.engine.assignment import load_assignment
+from autograder.engine.grader import Grader, GradingOptions, engine_digest, submission_key
+from autograder.engine.slot import GradingSlot, StudentProcess
 from autograder.errors import EngineError
-from autograder.grading import Grader, GradingOptions, engine_digest, submission_key
-from autograder.session import StudentSession, WorkerSlot
-from autograder.sandbox import IsolationPolicy
+from autograder.sandbox.confine import IsolationPolicy
 
 ROOT = Path(__file__).resolve().parents[2]
 HULL = ROOT / "assignments" / "hull"
@@ -85,9 +85,9 @@ def test_scores_do_not_change_when_every_core_is_busy(tmp_path: Path) -> None:
     assert 0 < loaded["extra_data"]["cpu_seconds"] < 120
 
 
-def session(tmp_path: Path, cells: list[str], **options: float) -> StudentSession:
-    slot = WorkerSlot(slot=0)
-    made = StudentSession(slot=slot, cells=list(enumerate(cells)), data_files=[],
+def session(tmp_path: Path, cells: list[str], **options: float) -> StudentProcess:
+    slot = GradingSlot(slot=0)
+    made = StudentProcess(slot=slot, cells=list(enumerate(cells)), data_files=[],
                           policy=IsolationPolicy(), notebook_timeout=options.get("notebook", 30.0),
                           exclude=[ROOT])
     made.start()
@@ -193,14 +193,14 @@ def test_the_key_changes_with_data_checks_engine_and_policy(tmp_path: Path) -> N
 def test_an_incomplete_sandbox_is_an_engine_error(tmp_path: Path) -> None:
     import numpy
 
-    slot = WorkerSlot(slot=0)
-    broken = StudentSession(slot=slot, cells=[(0, "x = 1")], data_files=[],
+    slot = GradingSlot(slot=0)
+    broken = StudentProcess(slot=slot, cells=[(0, "x = 1")], data_files=[],
                             policy=IsolationPolicy(), notebook_timeout=30,
                             exclude=[Path(numpy.__file__).parent])
     try:
         if not IsolationPolicy().landlock:
             pytest.skip("Landlock is off")
-        from autograder.sandbox import probe_support
+        from autograder.sandbox.confine import probe_support
         if probe_support().landlock_abi == 0:
             pytest.skip("Landlock is not available on this kernel: no file rules to get wrong")
         with pytest.raises(EngineError, match="cannot read"):
@@ -213,7 +213,7 @@ def test_an_incomplete_sandbox_is_an_engine_error(tmp_path: Path) -> None:
 # -- locked cells are the instructor's --------------------------------------------
 
 def test_a_rewritten_locked_cell_is_restored(tmp_path: Path) -> None:
-    from autograder.notebook import locked_sources
+    from autograder.engine.notebook import locked_sources
 
     locked = locked_sources(HULL / "hull.ipynb")
     if not locked:
@@ -270,7 +270,7 @@ def test_started_from_the_course_folder_the_worker_reads_no_other_submission(tmp
     probe = (f"try:\n    open({str(bob)!r}).read(10)\n    print('READ-CLASSMATE')\n"
              "except OSError as exc:\n    print('DENIED', type(exc).__name__)\n")
     with_cell(SOLUTION, probe, course / "submitted" / "eve" / "hull" / "hull.ipynb")
-    from autograder.sandbox import probe_support
+    from autograder.sandbox.confine import probe_support
     if probe_support().landlock_abi == 0:
         pytest.skip("Landlock is not available on this kernel: files are not confined")
     proc = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", "submitted",

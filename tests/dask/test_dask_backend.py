@@ -26,11 +26,12 @@ import dask  # noqa: E402
 
 import dask_test_plugins  # noqa: E402
 from autograder import api  # noqa: E402
-from autograder.backends import DaskSpec, TLSFiles  # noqa: E402
-from autograder.backends.dask_cluster import RESOURCE, local_cluster  # noqa: E402
+from autograder.runners.jobs import DaskSpec  # noqa: E402
+from autograder.runners.jobs import TLSFiles  # noqa: E402
+from autograder.runners.dask_cluster import RESOURCE, local_cluster  # noqa: E402
 from autograder.errors import UsageError  # noqa: E402
-from autograder.grading import GradingOptions  # noqa: E402
-from autograder.report import read_result  # noqa: E402
+from autograder.engine.grader import GradingOptions  # noqa: E402
+from autograder.results.store import read_result  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 

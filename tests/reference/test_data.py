@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 import reference._data as data
-from reference import CAR_STROKE_NAMES, car, load_strokes, save_car
-from reference import parametric_spline
+from reference import CAR_STROKE_NAMES, car, load_strokes, parametric_spline, save_car
 
 CLOSED = {"rear_window", "front_window", "rear_wheel", "front_wheel", "rear_hubcap", "front_hubcap"}
 # How far the drawn spline may leave the bounding box of its points, as a

@@ -18,9 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import Delaunay
 
-from reference import incircle_many, delaunay, incircle, is_delaunay
-from reference import orient2d_many, convex_hull
-
+from reference import convex_hull, delaunay, incircle, incircle_many, is_delaunay, orient2d_many
 
 # ---------------------------------------------------------------------------
 # Named datasets

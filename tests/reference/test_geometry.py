@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
-from reference import orient2d_many, convex_hull, orient2d
+from reference import convex_hull, orient2d, orient2d_many
 
 METHODS = ("monotone", "jarvis")
 ULP_HALF = 2.0**-53  # spacing of doubles in [0.5, 1)

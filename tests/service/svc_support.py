@@ -23,7 +23,13 @@ from typing import Any
 import httpx
 
 from tests.support.webdriver import (  # noqa: F401 (re-exported for the service tests)
-    CHROMEDRIVER, CHROMIUM, FLAGS, WebDriver, free_port, start_chromedriver)
+    CHROMEDRIVER,
+    CHROMIUM,
+    FLAGS,
+    WebDriver,
+    free_port,
+    start_chromedriver,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 HULL_EXAMPLES = ROOT / "assignments" / "hull" / "examples"

@@ -6,10 +6,9 @@ import re
 
 import httpx
 import pytest
-from sqlalchemy import text
-
 import svc_support as support
 from conftest import MAX_BYTES, PER_HOUR, Running
+from sqlalchemy import text
 
 SOLUTION = (support.HULL_EXAMPLES / "solution.ipynb").read_bytes()
 SMALL = (support.HULL_EXAMPLES / "partial-only-orientation.ipynb").read_bytes()

@@ -29,8 +29,8 @@ pytest.importorskip("distributed", reason="grading on Dask needs the dask extra:
 import svc_support as support  # noqa: E402
 from conftest import CLASS, Running  # noqa: E402
 
-from autograder.assignment import load_assignment  # noqa: E402
-from autograder.grading import GradingOptions, submission_key  # noqa: E402
+from autograder.engine.assignment import load_assignment  # noqa: E402
+from autograder.engine.grader import GradingOptions, submission_key  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 

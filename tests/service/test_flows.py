@@ -13,10 +13,9 @@ import zipfile
 
 import httpx
 import pytest
-from sqlalchemy import text
-
 import svc_support as support
 from conftest import Running
+from sqlalchemy import text
 
 SOLUTION = (support.HULL_EXAMPLES / "solution.ipynb").read_bytes()
 CLOCKWISE = (support.HULL_EXAMPLES / "wrong-clockwise.ipynb").read_bytes()

@@ -23,11 +23,11 @@ from typing import Callable
 
 import httpx
 import pytest
+import svc_support as support
+from conftest import iso
 from sqlalchemy import create_engine, text
 
-import svc_support as support
-from autograder import tempdirs
-from conftest import iso
+from autograder.sandbox import tempdirs
 
 STUDENTS = 60
 PER_STUDENT = 5

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.interpolate import BarycentricInterpolator
 
 import approximation_feedback as fb  # checks/public/: on sys.path while checks run
-from autograder.callbacks import traced
+from autograder.engine.callbacks import traced
 from autograder.checks import (
     CheckFailure,
     Credit,

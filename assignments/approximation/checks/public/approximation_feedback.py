@@ -3,7 +3,7 @@
 Released with the public checks (so it uses SciPy, never the `reference`
 package, which students do not have); the hidden checks import it too. The
 functions the checks pass to student code are wrapped in
-:func:`autograder.callbacks.traced`, so after a call the check knows every
+:func:`autograder.engine.callbacks.traced`, so after a call the check knows every
 point where the student's code evaluated them.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import BarycentricInterpolator
 
-from autograder.callbacks import Traced
+from autograder.engine.callbacks import Traced
 from autograder.checks import CheckFailure, Credit, plural, show_number
 
 #: two points count as the same node within this distance (nodes are computed

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import approximation_feedback as fb  # checks/public/: on sys.path while checks run
-from autograder.callbacks import traced
+from autograder.engine.callbacks import traced
 from autograder.checks import (Credit, Student, expect_array, expect_close, expect_number,
                                over_datasets)
 

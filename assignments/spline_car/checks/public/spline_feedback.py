@@ -10,7 +10,7 @@ The properties are read from the coefficients themselves, so a check can say
 *which* property fails, not only that a number differs.
 
 Drawings are judged by the distance between the drawn points and the
-reference drawing (:mod:`autograder.curves`), with the two pictures attached
+reference drawing (:mod:`autograder.checks.compare_curves`), with the two pictures attached
 side by side. The reference drawing is made here, with SciPy's natural
 ``CubicSpline`` in the chord-length parameter (the model solution is not
 part of a student's install, so released helpers never import it).
@@ -39,7 +39,7 @@ from autograder.checks import (
     show_number,
     side_by_side,
 )
-from autograder.curves import CurveDistance, curve_points, hausdorff, relative_curve_distance
+from autograder.checks.compare_curves import CurveDistance, curve_points, hausdorff, relative_curve_distance
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -1,0 +1,270 @@
+"""The student version of an assignment, made with nbgrader's own preprocessors.
+
+:func:`release` writes into ``out_dir``::
+
+    <name>.ipynb            the student template (no solutions, no hidden tests)
+    data/...                the public data files, at their paths relative to the folder
+    checks/public/...       every file under checks/public/ (tests and their helpers)
+    assignment.toml         name, title, notebook, data and rules, so that the
+                            released folder can be loaded to run the public checks
+
+Nothing from ``checks/hidden/``, nor ``checks/conftest.py``, is released. After
+writing, the output is checked again (defence in depth): a solution or hidden
+test marker, or a line from a hidden check, in the written notebook, or a
+copy of a hidden check anywhere in ``out_dir``, deletes the notebook and raises
+:class:`~autograder.errors.AssignmentError`.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import logging
+import shutil
+from pathlib import Path
+from typing import Any
+
+import nbformat
+
+from autograder.engine.assignment import Assignment
+from autograder.errors import AssignmentError, UsageError
+
+__all__ = ["release", "student_template", "PREPROCESSORS", "FORBIDDEN_MARKERS"]
+
+#: The passes of ``nbgrader generate_assignment`` that need no course or database
+#: (classes of ``nbgrader.preprocessors``), in nbgrader's order
+#: (``converters/generate_assignment.py``). Checksums are computed again after
+#: the hidden tests are cleared, as nbgrader does. Left out: IncludeHeaderFooter
+#: and InstantiateTests (need course configuration), SaveCells (needs the
+#: gradebook database).
+PREPROCESSORS = (
+    "LockCells",
+    "ClearSolutions",
+    "ClearOutput",
+    "CheckCellMetadata",
+    "ComputeChecksums",
+    "ClearHiddenTests",
+    "ClearMarkScheme",
+    "ComputeChecksums",
+    "CheckCellMetadata",
+)
+#: Text that must never appear in a released notebook.
+FORBIDDEN_MARKERS = ("BEGIN SOLUTION", "END SOLUTION", "BEGIN HIDDEN TESTS",
+                     "END HIDDEN TESTS", "BEGIN MARK SCHEME", "END MARK SCHEME")
+#: Lines of hidden checks at least this long (stripped) must not appear in the notebook.
+_DISTINCTIVE = 32
+_LOG = logging.getLogger("autograder.authoring.release")
+
+
+def student_template(assignment: Assignment) -> nbformat.NotebookNode:
+    """The student version of ``assignment.notebook``, in memory.
+
+    Parameters
+    ----------
+    assignment : Assignment
+
+    Returns
+    -------
+    nbformat.NotebookNode
+        A format-4 notebook with solution regions replaced by nbgrader's stub
+        (``raise NotImplementedError()``), hidden tests and mark schemes
+        removed, outputs cleared, nbgrader cells locked and checksummed.
+
+    Raises
+    ------
+    AssignmentError
+        The instructor notebook cannot be read, or nbgrader rejects it (for
+        example a solution region outside a solution cell).
+    """
+    # nbgrader is imported here: it is slow to import and only releasing needs it.
+    try:
+        from nbgrader import preprocessors
+        from nbgrader.nbgraderformat import ValidationError as MetadataError
+    except ImportError:
+        raise UsageError(
+            "Releasing an assignment runs nbgrader's preprocessors, and nbgrader is not "
+            "installed: install the instructor's extra, python -m pip install "
+            "\"numgrade[instructor]\" (or -e \".[instructor]\" in a checkout).") from None
+
+    nb = _read_instructor(assignment.notebook)
+    resources: dict[str, Any] = {}
+    for name in PREPROCESSORS:
+        try:
+            nb, resources = getattr(preprocessors, name)(log=_LOG).preprocess(nb, resources)
+        except (RuntimeError, ValueError, MetadataError, KeyError) as exc:
+            raise AssignmentError(
+                f"{assignment.notebook}: nbgrader's {name} failed: {exc}. "
+                "Check the cell's nbgrader metadata (Create Assignment toolbar) and its "
+                "### BEGIN/END markers.") from None
+    _verify_template(assignment, nb, where="the student template")
+    return nb
+
+
+def release(assignment: Assignment, out_dir: Path) -> Path:
+    """Write the student version of ``assignment`` into ``out_dir``.
+
+    Parameters
+    ----------
+    assignment : Assignment
+    out_dir : Path
+        Created if missing; must not be inside the assignment folder.
+
+    Returns
+    -------
+    Path
+        ``out_dir / f"{assignment.name}.ipynb"``.
+
+    Raises
+    ------
+    AssignmentError
+        The template cannot be made, ``out_dir`` is inside the assignment, or
+        the written output contains a solution or a hidden check.
+    """
+    out_dir = Path(out_dir).resolve()
+    if out_dir == assignment.root or _is_within(out_dir, assignment.root):
+        raise AssignmentError(f"Release folder {out_dir} is inside the assignment folder "
+                              f"{assignment.root}; choose a folder outside it.")
+    nb = student_template(assignment)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    target = out_dir / f"{assignment.name}.ipynb"
+    nbformat.write(nb, str(target), version=4)
+    copied = _copy_public_files(assignment, out_dir)
+    _write_toml(assignment, out_dir, target, copied)
+    try:
+        _verify_release(assignment, out_dir, target)
+    except AssignmentError:
+        target.unlink(missing_ok=True)
+        raise
+    return target
+
+
+# -- reading and writing -------------------------------------------------------
+
+def _read_instructor(path: Path) -> nbformat.NotebookNode:
+    try:
+        return copy.deepcopy(nbformat.read(str(path), as_version=4))
+    except Exception as exc:  # nbformat raises many types on a damaged file
+        raise AssignmentError(f"The instructor notebook {path} cannot be read: {exc}. "
+                              "Open it in Jupyter and save it.") from None
+
+
+def _is_within(path: Path, folder: Path) -> bool:
+    try:
+        path.relative_to(folder)
+    except ValueError:
+        return False
+    return True
+
+
+def _public_files(assignment: Assignment) -> list[Path]:
+    """Every file under ``checks/public/`` except caches."""
+    folder = assignment.root / "checks" / "public"
+    return sorted(p for p in folder.rglob("*")
+                  if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc")
+
+
+def _copy_public_files(assignment: Assignment, out_dir: Path) -> list[Path]:
+    """Copy data files and public checks, keeping paths relative to the folder."""
+    copied = []
+    for source in (*assignment.data_files, *_public_files(assignment)):
+        relative = source.relative_to(assignment.root)
+        destination = out_dir / relative
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, destination)
+        copied.append(relative)
+    return copied
+
+
+def _write_toml(assignment: Assignment, out_dir: Path, notebook: Path,
+                copied: list[Path]) -> None:
+    """A minimal ``assignment.toml`` describing the released folder."""
+    data = [p.as_posix() for p in copied if p.parts[0] != "checks"]
+    lines = [
+        "# Written by autograder.authoring.release: the student version of this assignment.",
+        "[assignment]",
+        f"name = {_toml_str(assignment.name)}",
+        f"title = {_toml_str(assignment.title)}",
+        f"notebook = {_toml_str(notebook.name)}",
+        f"data = [{', '.join(_toml_str(d) for d in data)}]",
+        "",
+        "[rules]",
+        f"forbid = [{', '.join(_toml_str(f) for f in assignment.rules.forbid)}]",
+        f"reason = {_toml_str(assignment.rules.reason)}",
+        "",
+        "[limits]",
+        f"notebook_timeout = {assignment.notebook_timeout!r}",
+        f"call_timeout = {assignment.call_timeout!r}",
+        *(f"{key} = {value!r}" for key, value in assignment.limits),
+    ]
+    (out_dir / "assignment.toml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _toml_str(text: str) -> str:
+    """A TOML basic string (JSON escapes are valid TOML escapes)."""
+    return json.dumps(text, ensure_ascii=True)
+
+
+# -- defence in depth ----------------------------------------------------------
+
+def _hidden_files(assignment: Assignment) -> list[Path]:
+    folder = assignment.root / "checks" / "hidden"
+    return sorted(p for p in folder.rglob("*")
+                  if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc")
+
+
+def _long_lines(paths: list[Path]) -> set[str]:
+    """Stripped lines of the ``.py`` files in ``paths`` that are long and not imports."""
+    lines: set[str] = set()
+    for path in paths:
+        if path.suffix != ".py":
+            continue
+        for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+            line = line.strip()
+            if len(line) >= _DISTINCTIVE and not line.startswith(("import ", "from ", "#")):
+                lines.add(line)
+    return lines
+
+
+def _distinctive_lines(assignment: Assignment) -> set[str]:
+    """Long lines of the hidden checks that no public check also has."""
+    return _long_lines(_hidden_files(assignment)) - _long_lines(_public_files(assignment))
+
+
+def _verify_template(assignment: Assignment, nb: nbformat.NotebookNode, *, where: str) -> None:
+    """Raise when ``nb`` still holds a marker or a line of a hidden check."""
+    hidden = _distinctive_lines(assignment)
+    for number, cell in enumerate(nb.cells, start=1):
+        source = cell.get("source", "")
+        for marker in FORBIDDEN_MARKERS:
+            if marker in source:
+                raise _leak(assignment, where, f"cell {number} still contains {marker!r}")
+        for line in source.splitlines():
+            if line.strip() in hidden:
+                raise _leak(assignment, where,
+                            f"cell {number} contains a line of a hidden check: {line.strip()!r}")
+
+
+def _verify_release(assignment: Assignment, out_dir: Path, notebook: Path) -> None:
+    """Check the written notebook and every file in ``out_dir`` for hidden material."""
+    text = notebook.read_text(encoding="utf-8")
+    for marker in FORBIDDEN_MARKERS:
+        if marker in text:
+            raise _leak(assignment, str(notebook), f"it contains {marker!r}")
+    _verify_template(assignment, nbformat.reads(text, as_version=4), where=str(notebook))
+    secret = {_sha256(p): p for p in _hidden_files(assignment) if p.read_bytes().strip()}
+    for path in out_dir.rglob("*"):
+        if path.is_file() and _sha256(path) in secret:
+            raise _leak(assignment, str(path),
+                        f"it is a copy of {secret[_sha256(path)].relative_to(assignment.root)}")
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _leak(assignment: Assignment, where: str, detail: str) -> AssignmentError:
+    return AssignmentError(
+        f"Refusing to release {assignment.name!r}: {where}: {detail}. Move solutions inside "
+        "### BEGIN SOLUTION / ### END SOLUTION in solution cells, and keep hidden checks "
+        "out of the notebook and the public folders.")

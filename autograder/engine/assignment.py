@@ -1,0 +1,443 @@
+"""Load an assignment folder (``assignment.toml``, notebook, data, checks).
+
+An assignment folder looks like this (see ``docs/design.md``)::
+
+    hull/
+      assignment.toml
+      hull.ipynb              instructor notebook (nbgrader format)
+      data/...                public data files, selected by globs
+      checks/public/test_*.py released to students
+      checks/hidden/test_*.py never released
+
+``assignment.toml`` has three tables, all keys optional except that the
+notebook, at least one check and every data glob must exist::
+
+    [assignment]
+    name = "hull"                 # default: the folder name
+    title = "Convex hull"         # default: the name
+    notebook = "hull.ipynb"       # default: "<name>.ipynb"
+    data = ["data/*.npy"]         # globs relative to the folder
+
+    [rules]
+    forbid = ["scipy.spatial"]
+    reason = "Write Jarvis march yourself."
+
+    [limits]
+    notebook_timeout = 60         # seconds for the whole notebook
+    call_timeout = 10             # seconds per call from a check
+    memory_bytes = 2_000_000_000  # and the other fields of autograder.sandbox.confine.Limits
+
+Every mistake raises :class:`~autograder.errors.AssignmentError` naming the
+file, the key and what to do.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import autograder
+from autograder.errors import AssignmentError
+
+__all__ = [
+    "Rules",
+    "Assignment",
+    "load_assignment",
+    "list_assignments",
+    "default_search_root",
+    "checks_digest",
+    "SANDBOX_LIMITS",
+]
+
+#: Keys of ``[limits]`` passed on to ``autograder.sandbox.confine.Limits``.
+SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
+                  "file_size_bytes", "output_bytes")
+_TIMEOUTS = ("notebook_timeout", "call_timeout")
+_ALLOWED = {
+    "assignment": ("name", "title", "notebook", "data"),
+    "rules": ("forbid", "reason", "internal_use"),
+    "limits": _TIMEOUTS + SANDBOX_LIMITS,
+}
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+_DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
+_TOML = "assignment.toml"
+
+
+@dataclass(frozen=True)
+class Rules:
+    """What the static scan forbids, and the reason shown to the student.
+
+    Attributes
+    ----------
+    forbid : tuple of str
+        Dotted names: a module (``"scipy.spatial"``, everything under it) or an
+        attribute (``"scipy.interpolate.CubicSpline"``).
+    reason : str
+        The message given with a zero score for a forbidden use.
+    """
+
+    forbid: tuple[str, ...] = ()
+    reason: str = ""
+    #: forbidden names that allowed libraries need inside (``matplotlib.path`` for
+    #: drawing): student code may not name them, but the worker leaves the aliases
+    #: inside other libraries working
+    internal_use: tuple[str, ...] = ()
+
+    def to_wire(self) -> dict[str, object]:
+        """The plain data the worker's guard takes (see ``autograder.worker.guard``)."""
+        return {"names": list(self.forbid), "internal_use": list(self.internal_use),
+                "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """A loaded assignment folder; all paths are absolute.
+
+    Attributes
+    ----------
+    name, title : str
+        The name (default: the folder name) and a human title.
+    root : Path
+        The assignment folder.
+    notebook : Path
+        The instructor notebook (with solutions).
+    data_files : tuple of Path
+        Public data files matched by the ``data`` globs, sorted.
+    public_checks, hidden_checks : tuple of Path
+        ``checks/public/test_*.py`` and ``checks/hidden/test_*.py``, sorted.
+    rules : Rules
+        Forbidden names.
+    notebook_timeout, call_timeout : float
+        Seconds for running the whole notebook, and for one call from a check.
+    limits : tuple of (str, int or float)
+        Overrides for ``autograder.sandbox.confine.Limits``, sorted by name; build the
+        limits with ``Limits(**dict(assignment.limits))``.
+    checks_digest : str
+        SHA-256 over ``assignment.toml`` and every file under ``checks/``
+        (path and contents, sorted by relative path): changes when grading
+        could change.
+    """
+
+    name: str
+    title: str
+    root: Path
+    notebook: Path
+    data_files: tuple[Path, ...]
+    public_checks: tuple[Path, ...]
+    hidden_checks: tuple[Path, ...]
+    rules: Rules = field(default_factory=Rules)
+    notebook_timeout: float = 60.0
+    call_timeout: float = 10.0
+    limits: tuple[tuple[str, int | float], ...] = ()
+    checks_digest: str = ""
+
+
+def default_search_root() -> Path:
+    """The folder holding ``assignments/``: the repository, else the current directory.
+
+    The repository is the parent of the installed ``autograder`` package (an
+    editable install); it is used when it has an ``assignments/`` folder.
+    """
+    repository = Path(autograder.__file__).resolve().parent.parent
+    if (repository / "assignments").is_dir():
+        return repository
+    return Path.cwd()
+
+
+def list_assignments(search_root: Path | None = None) -> list[str]:
+    """Names of the assignment folders (those with an ``assignment.toml``), sorted.
+
+    Parameters
+    ----------
+    search_root : Path, optional
+        A folder holding ``assignments/``, or the ``assignments/`` folder
+        itself. Default: :func:`default_search_root`.
+    """
+    folder = _assignments_dir(search_root)
+    if not folder.is_dir():
+        return []
+    return sorted(p.name for p in folder.iterdir() if (p / _TOML).is_file())
+
+
+def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Assignment:
+    """Load an assignment by name or by path.
+
+    Parameters
+    ----------
+    spec : str or Path
+        A folder name under ``assignments/`` (``"hull"``), or a path to an
+        assignment folder or to its ``assignment.toml``. A :class:`Path`, or a
+        string holding a path separator, is always taken as a path.
+    search_root : Path, optional
+        Where to look names up: a folder holding ``assignments/``, or the
+        ``assignments/`` folder itself. Default: :func:`default_search_root`.
+
+    Returns
+    -------
+    Assignment
+
+    Raises
+    ------
+    AssignmentError
+        Unknown name, missing or malformed ``assignment.toml``, missing
+        notebook, a data glob matching nothing, no checks.
+    """
+    root = _find_root(spec, search_root)
+    toml_path = root / _TOML
+    config = _read_toml(toml_path)
+    return _build(root, toml_path, config)
+
+
+# -- finding the folder --------------------------------------------------------
+
+def _assignments_dir(search_root: Path | None) -> Path:
+    base = Path(search_root) if search_root is not None else default_search_root()
+    return base / "assignments" if (base / "assignments").is_dir() else base
+
+
+def _find_root(spec: str | Path, search_root: Path | None) -> Path:
+    if isinstance(spec, str) and not spec.strip():
+        raise AssignmentError("The assignment name is empty; give a name or a folder.")
+    if isinstance(spec, str) and not _looks_like_path(spec):
+        candidate = _assignments_dir(search_root) / spec
+        if candidate.is_dir():
+            return _checked_root(candidate)
+        if Path(spec).is_dir():
+            return _checked_root(Path(spec))
+        raise _unknown(spec, search_root)
+    path = Path(spec)
+    if path.name == _TOML and path.is_file():
+        path = path.parent
+    if not path.is_dir():
+        raise AssignmentError(f"Assignment folder {str(path)!r} does not exist; "
+                              "give a name under assignments/ or an existing folder.")
+    return _checked_root(path)
+
+
+def _looks_like_path(spec: str) -> bool:
+    return "/" in spec or "\\" in spec or spec in (".", "..") or spec.endswith(_TOML)
+
+
+def _checked_root(path: Path) -> Path:
+    root = path.resolve()
+    if not (root / _TOML).is_file():
+        raise AssignmentError(
+            f"{root} has no {_TOML}; every assignment folder needs one "
+            "(see 'An assignment folder' in docs/design.md).")
+    return root
+
+
+def _unknown(spec: str, search_root: Path | None) -> AssignmentError:
+    folder = _assignments_dir(search_root)
+    names = list_assignments(search_root)
+    if not names:
+        return AssignmentError(f"Unknown assignment {spec!r}: there are no assignments in "
+                               f"{folder}. Give the path to an assignment folder instead.")
+    close = difflib.get_close_matches(spec, names, n=1)
+    hint = f" Did you mean {close[0]!r}?" if close else ""
+    return AssignmentError(f"Unknown assignment {spec!r}.{hint} Available in {folder}: "
+                           f"{', '.join(names)}.")
+
+
+# -- reading the TOML ----------------------------------------------------------
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as handle:
+            config = tomllib.load(handle)
+    except tomllib.TOMLDecodeError as exc:
+        raise AssignmentError(f"{path}: TOML syntax error: {exc}. Fix the file.") from None
+    except UnicodeDecodeError:
+        raise AssignmentError(f"{path}: not UTF-8 text; save it as UTF-8.") from None
+    except OSError as exc:
+        raise AssignmentError(f"{path}: cannot be read ({exc.strerror or exc}).") from None
+    _check_keys(path, config)
+    return config
+
+
+def _check_keys(path: Path, config: dict[str, Any]) -> None:
+    unknown = sorted(set(config) - set(_ALLOWED))
+    if unknown:
+        raise AssignmentError(f"{path}: unknown table(s) {_listed(unknown)}; "
+                              f"allowed tables: {_listed(_ALLOWED)}.")
+    for table, allowed in _ALLOWED.items():
+        section = config.get(table, {})
+        if not isinstance(section, dict):
+            raise AssignmentError(f"{path}: '{table}' must be a table ([{table}]).")
+        unknown = sorted(set(section) - set(allowed))
+        if unknown:
+            raise AssignmentError(f"{path}: unknown key(s) {_listed(unknown)} in [{table}]; "
+                                  f"allowed keys: {_listed(allowed)}.")
+
+
+def _listed(names: Any) -> str:
+    return ", ".join(repr(n) for n in names)
+
+
+def _get(path: Path, config: dict[str, Any], table: str, key: str,
+         kind: type | tuple[type, ...], default: Any) -> Any:
+    """``config[table][key]`` checked against ``kind``, else ``default``."""
+    section = config.get(table, {})
+    if key not in section:
+        return default
+    value = section[key]
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        want = " or ".join(k.__name__ for k in kinds)
+        raise AssignmentError(f"{path}: [{table}] {key} must be {_article(want)}; "
+                              f"got {type(value).__name__} {value!r}.")
+    return value
+
+
+def _article(word: str) -> str:
+    names = {"str": "a string", "list": "a list", "int": "an integer",
+             "int or float": "a number", "float": "a number"}
+    return names.get(word, word)
+
+
+def _string_list(path: Path, config: dict[str, Any], table: str, key: str) -> tuple[str, ...]:
+    values = _get(path, config, table, key, list, [])
+    for value in values:
+        if not isinstance(value, str) or not value.strip():
+            raise AssignmentError(f"{path}: [{table}] {key} must be a list of non-empty "
+                                  f"strings; got {value!r} in it.")
+    return tuple(values)
+
+
+# -- building the Assignment ---------------------------------------------------
+
+def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
+    name = _name(root, toml_path, config)
+    title = _get(toml_path, config, "assignment", "title", str, name)
+    notebook = _notebook(root, toml_path,
+                         _get(toml_path, config, "assignment", "notebook", str, f"{name}.ipynb"))
+    data = _data_files(root, toml_path, _string_list(toml_path, config, "assignment", "data"))
+    public, hidden = _checks(root, "public"), _checks(root, "hidden")
+    if not public and not hidden:
+        raise AssignmentError(
+            f"{root} has no checks: add test_*.py files under checks/public/ (released to "
+            "students) or checks/hidden/ (kept back).")
+    timeouts, limits = _limits(toml_path, config)
+    return Assignment(
+        name=name, title=title, root=root, notebook=notebook, data_files=data,
+        public_checks=public, hidden_checks=hidden, rules=_rules(toml_path, config),
+        notebook_timeout=timeouts["notebook_timeout"], call_timeout=timeouts["call_timeout"],
+        limits=limits, checks_digest=checks_digest(root))
+
+
+def _name(root: Path, toml_path: Path, config: dict[str, Any]) -> str:
+    name = _get(toml_path, config, "assignment", "name", str, root.name)
+    if not _NAME.match(name):
+        raise AssignmentError(f"{toml_path}: [assignment] name {name!r} must use only letters, "
+                              "digits, '_', '-' and '.'.")
+    return name
+
+
+def _inside(root: Path, path: Path) -> bool:
+    try:
+        path.resolve().relative_to(root)
+    except ValueError:
+        return False
+    return True
+
+
+def _notebook(root: Path, toml_path: Path, relative: str) -> Path:
+    path = root / relative
+    if not _inside(root, path):
+        raise AssignmentError(f"{toml_path}: [assignment] notebook {relative!r} must be inside "
+                              f"{root}.")
+    if not path.is_file():
+        raise AssignmentError(f"{toml_path}: the notebook {relative!r} was not found in {root}; "
+                              "add it, or set [assignment] notebook to its name.")
+    return path.resolve()
+
+
+def _data_files(root: Path, toml_path: Path, globs: tuple[str, ...]) -> tuple[Path, ...]:
+    found: set[Path] = set()
+    for pattern in globs:
+        if Path(pattern).is_absolute() or ".." in Path(pattern).parts:
+            raise AssignmentError(f"{toml_path}: data glob {pattern!r} must be relative to the "
+                                  "assignment folder, without '..'.")
+        try:
+            matches = {p for p in root.glob(pattern) if p.is_file()}
+        except ValueError as exc:
+            raise AssignmentError(f"{toml_path}: data glob {pattern!r} is not a valid "
+                                  f"pattern ({exc}).") from None
+        if not matches:
+            raise AssignmentError(f"{toml_path}: data glob {pattern!r} matches no file in "
+                                  f"{root}; fix the pattern or add the files.")
+        for path in matches:
+            _check_data_file(root, toml_path, pattern, path)
+        found |= matches
+    return tuple(sorted(found))
+
+
+def _check_data_file(root: Path, toml_path: Path, pattern: str, path: Path) -> None:
+    if not _inside(root, path):
+        raise AssignmentError(f"{toml_path}: data glob {pattern!r} matches {path}, which "
+                              "points outside the assignment folder.")
+    if path.relative_to(root).parts[0] == "checks":
+        raise AssignmentError(f"{toml_path}: data glob {pattern!r} matches {path}, under "
+                              "checks/; data files are released, so keep them out of checks/.")
+
+
+def _checks(root: Path, which: str) -> tuple[Path, ...]:
+    folder = root / "checks" / which
+    return tuple(sorted(p for p in folder.glob("test_*.py") if p.is_file()))
+
+
+def _rules(toml_path: Path, config: dict[str, Any]) -> Rules:
+    forbid = _string_list(toml_path, config, "rules", "forbid")
+    for name in forbid:
+        if not _DOTTED.match(name):
+            raise AssignmentError(f"{toml_path}: [rules] forbid entry {name!r} must be a dotted "
+                                  "name such as 'scipy.spatial' or 'numpy.linalg.solve'.")
+    default = (f"This assignment does not allow {', '.join(forbid)}." if forbid else "")
+    reason = _get(toml_path, config, "rules", "reason", str, default)
+    internal = _string_list(toml_path, config, "rules", "internal_use")
+    stray = [name for name in internal if name not in forbid]
+    if stray:
+        raise AssignmentError(f"{toml_path}: [rules] internal_use lists {', '.join(stray)}, "
+                              "which [rules] forbid does not; list only forbidden names there.")
+    return Rules(forbid=forbid, reason=reason, internal_use=internal)
+
+
+def _limits(toml_path: Path, config: dict[str, Any]
+            ) -> tuple[dict[str, float], tuple[tuple[str, int | float], ...]]:
+    """The two timeouts, and the sandbox overrides sorted by name."""
+    timeouts = {"notebook_timeout": 60.0, "call_timeout": 10.0}
+    overrides: list[tuple[str, int | float]] = []
+    for key in _TIMEOUTS + SANDBOX_LIMITS:
+        kind: tuple[type, ...] = (int, float) if key in _TIMEOUTS + ("cpu_seconds",) else (int,)
+        value = _get(toml_path, config, "limits", key, kind, None)
+        if value is None:
+            continue
+        if value <= 0:
+            raise AssignmentError(f"{toml_path}: [limits] {key} must be positive; got {value!r}.")
+        if key in _TIMEOUTS:
+            timeouts[key] = float(value)
+        else:
+            overrides.append((key, value))
+    return timeouts, tuple(sorted(overrides))
+
+
+def checks_digest(root: Path) -> str:
+    """SHA-256 over ``assignment.toml`` and the files under ``checks/``.
+
+    Each file contributes its path relative to ``root`` and the digest of its
+    bytes, in order of path; caches (``__pycache__``, ``*.pyc``) are skipped.
+    """
+    files = [root / _TOML] + [
+        p for p in (root / "checks").rglob("*")
+        if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"
+    ]
+    digest = hashlib.sha256()
+    for path in sorted(files, key=lambda p: p.relative_to(root).as_posix()):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+        digest.update(hashlib.sha256(path.read_bytes()).digest())
+    return digest.hexdigest()

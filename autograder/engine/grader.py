@@ -1,0 +1,504 @@
+"""Grade one submission: the unit of work (one notebook in, one result out).
+
+:class:`Grader` keeps a warm worker slot and the imported checks between
+submissions, so a batch engine (ours in :mod:`autograder.runners.batch`, or a
+distributed one later) only has to call :meth:`Grader.grade` per file.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.util
+import os
+import stat
+import time
+import traceback
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Sequence
+
+import autograder
+from autograder.engine import staticscan
+from autograder.engine.assignment import Assignment
+from autograder.engine.checkrun import CheckSuite, forget_check_modules
+from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
+from autograder.engine.plugin import CheckContext
+from autograder.engine.slot import GradingSlot, NotebookRun, StudentProcess
+from autograder.errors import NotebookError, WorkerCrashed
+from autograder.results.model import CellError, CheckResult, SubmissionResult
+from autograder.results.store import write_submission
+from autograder.sandbox import affinity
+from autograder.sandbox.confine import IsolationPolicy
+
+#: bump when a change to the engine can change a score (part of every result's key)
+ENGINE_VERSION = f"autograder-{autograder.__version__}"
+
+
+@dataclass(frozen=True)
+class GradingOptions:
+    """How to grade; every field has a safe default (all isolation on)."""
+
+    policy: IsolationPolicy = field(default_factory=IsolationPolicy)
+    notebook_timeout: float | None = None
+    call_timeout: float | None = None
+    public_only: bool = False
+    #: a notebook full of outputs is still graded (outputs are dropped on reading)
+    max_notebook_bytes: int = 64 * 1024 * 1024
+
+    #: CPU seconds one submission may use in all (notebook, restarts, calls);
+    #: None: the notebook limit plus 20 call limits
+    cpu_budget: float | None = None
+
+    def digest(self) -> str:
+        """Everything in the options that can change a score, the isolation policy included."""
+        return hashlib.sha256(repr((self.public_only, self.notebook_timeout, self.call_timeout,
+                                    self.cpu_budget, self.max_notebook_bytes,
+                                    self.policy)).encode()).hexdigest()[:16]
+
+
+def policy_for(assignment: Assignment, options: GradingOptions) -> IsolationPolicy:
+    """The options' policy with the assignment's limit overrides applied."""
+    overrides: dict[str, Any] = dict(assignment.limits)
+    if not overrides:
+        return options.policy
+    limits = replace(options.policy.limits, **overrides)
+    return replace(options.policy, limits=limits)
+
+
+def submission_key(sha256: str, assignment: Assignment, options: GradingOptions,
+                   *, digest: str | None = None) -> str:
+    """Identifies a grading: a result is reused only when this key is unchanged.
+
+    It hashes the notebook's bytes, everything in the assignment folder that
+    grading reads (``assignment.toml``, the instructor notebook, data, checks;
+    not ``examples/``), the sources of the engine and of ``reference``, and the
+    options with the whole isolation policy. ``digest``: the assignment's
+    :func:`assignment_digest`, when the caller has it already.
+    """
+    text = "|".join((sha256, digest or assignment_digest(assignment), engine_digest(),
+                     ENGINE_VERSION, options.digest(), repr(assignment.limits)))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def submission_seed(assignment: Assignment, student: str) -> int:
+    """The seed of a submission's unseen data: from the assignment and the student only.
+
+    Never from the file's bytes, so a comment, whitespace or the time of grading
+    cannot change the data a submission is graded on.
+    """
+    text = f"{assignment.name}\0{student}"
+    return int(hashlib.sha256(text.encode()).hexdigest()[:8], 16)
+
+
+#: folders of an assignment that grading never reads
+_NOT_GRADED = frozenset({"examples", "__pycache__", ".ipynb_checkpoints", ".pytest_cache", ".git"})
+
+
+def assignment_digest(assignment: Assignment) -> str:
+    """SHA-256 over the files of the assignment folder that grading reads.
+
+    The contents are hashed again whenever a file's size or modification time
+    changes, so an edit made while a service or a batch runs is never missed.
+    """
+    return _cached_tree_digest(assignment.root, _stat_signature(assignment.root, _NOT_GRADED))
+
+
+def _stat_signature(root: Path, skip: frozenset[str]) -> tuple[tuple[str, int, int], ...]:
+    found = []
+    for directory, subdirs, files in os.walk(root):
+        subdirs[:] = sorted(d for d in subdirs if d not in skip)
+        for name in sorted(files):
+            info = os.stat(os.path.join(directory, name))
+            found.append((os.path.join(directory, name), info.st_size, info.st_mtime_ns))
+    return tuple(found)
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_tree_digest(root: Path, signature: tuple[tuple[str, int, int], ...]) -> str:
+    return _tree_digest(root, skip=_NOT_GRADED)
+
+
+@functools.cache
+def engine_digest() -> str:
+    """SHA-256 over the engine's sources and the ``reference`` package's, if installed."""
+    digest = hashlib.sha256()
+    roots = [Path(autograder.__file__).resolve().parent]
+    spec = importlib.util.find_spec("reference")
+    if spec is not None and spec.submodule_search_locations:
+        roots += [Path(p).resolve() for p in spec.submodule_search_locations]
+    for root in roots:
+        digest.update(f"{root.name}:{_tree_digest(root, skip=frozenset({'__pycache__'}))}".encode())
+    return digest.hexdigest()
+
+
+def _tree_digest(root: Path, *, skip: frozenset[str]) -> str:
+    digest = hashlib.sha256()
+    for directory, subdirs, files in os.walk(root):
+        subdirs[:] = sorted(d for d in subdirs if d not in skip and not d.endswith(".egg-info"))
+        for name in sorted(files):
+            if name.endswith((".pyc", ".pyo")):
+                continue
+            path = Path(directory, name)
+            digest.update(str(path.relative_to(root)).encode() + b"\0")
+            digest.update(_file_sha256(path).encode())
+    return digest.hexdigest()
+
+
+class _Unreadable:
+    """Stands in for a worker when the file could not be run at all."""
+
+    def __init__(self, message: str) -> None:
+        self.message = message
+
+    def call(self, name: str, args: Any, kwargs: dict[str, Any], *, timeout: float,
+             figures: bool = False) -> tuple[Any, list[Any]]:
+        raise WorkerCrashed(self.message)
+
+    def figures(self, *, timeout: float) -> list[Any]:
+        raise WorkerCrashed(self.message)
+
+
+class Grader:
+    """Grades submissions of one assignment, one at a time, on one warm worker slot."""
+
+    def __init__(self, assignment: Assignment, options: GradingOptions | None = None,
+                 *, slot: int = 0, scratch: Path | None = None,
+                 worker: GradingSlot | None = None) -> None:
+        """``worker``: a slot whose warm parent was started ahead (see
+        :func:`autograder.engine.slot.start_early`), used instead of claiming ``slot``;
+        the grader closes it with itself."""
+        self.assignment = assignment
+        self.options = options or GradingOptions()
+        self.policy = policy_for(assignment, self.options)
+        self._locked = locked_sources(assignment.notebook)
+        #: the checks, collected once and run for every submission, and the
+        #: assignment digest they were collected at (a new session when it changes)
+        self._checks: CheckSuite | None = None
+        self._checks_digest = ""
+        self._slot = worker if worker is not None else GradingSlot(slot=slot, scratch=scratch)
+
+    def __enter__(self) -> "Grader":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def prepare(self) -> None:
+        """Start the warm worker and collect the checks now; return once the worker is ready.
+
+        The worker imports numpy, scipy and matplotlib in its own process while this
+        one collects the checks, so the first submission waits for neither. Optional:
+        :meth:`grade` does whatever is left. A failure here (checks that cannot be
+        collected, a worker that does not start) is not raised: :meth:`grade` meets it
+        again and reports it in each submission's result, as without this call.
+        """
+        self._slot.start(wait=False)
+        try:
+            self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0, None),
+                                assignment_digest(self.assignment))
+            if self.assignment.rules.forbid:  # imports IPython's transformer meanwhile too
+                staticscan.scan((), self.assignment.rules.forbid)
+            self._slot.start()
+        except Exception:  # see the docstring: grade() reports it with each submission
+            pass
+
+    def close(self) -> None:
+        try:
+            self._close_checks()
+        finally:
+            self._slot.shutdown()
+
+    def _close_checks(self) -> None:
+        checks, self._checks = self._checks, None
+        if checks is not None:
+            checks.close()
+
+    @property
+    def check_files(self) -> list[Path]:
+        files = list(self.assignment.public_checks)
+        if not self.options.public_only:
+            files += list(self.assignment.hidden_checks)
+        return files
+
+    # -- the unit of work ----------------------------------------------------
+    def grade(self, path: Path, *, id: str | None = None,
+              out_dir: Path | None = None) -> SubmissionResult:
+        """Grade ``path``; write the result folder ``out_dir`` when it is given."""
+        start = time.perf_counter()
+        sub_id = id or Path(path).stem
+        raw_sha = _file_sha256(path)
+        digest = assignment_digest(self.assignment)
+        key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
+        seed = submission_seed(self.assignment, sub_id)
+        try:
+            _require_regular_file(Path(path))
+            notebook: Notebook | None = restore_locked(
+                read_notebook(path, max_bytes=self.options.max_notebook_bytes), self._locked)
+            problem = ""
+        except NotebookError as exc:
+            notebook, problem = None, str(exc)
+        if notebook is not None:
+            result = self._grade_notebook(notebook, seed, out_dir, digest)
+        else:
+            result = self._grade_unreadable(problem, seed, out_dir, digest)
+        result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
+                         execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
+        if out_dir is not None:
+            write_submission(out_dir, result, title=self.assignment.title)
+        return result
+
+    def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None,
+                          digest: str) -> SubmissionResult:
+        message = f"This file could not be graded: {problem}"
+        tests = self._run_checks(_Unreadable(message), (), {}, seed, out_dir, digest)
+        return _result(self.assignment.name, "ungradable", message, tests, seed)
+
+    def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None,
+                        digest: str) -> SubmissionResult:
+        cells = [(c.index, c.source) for c in notebook.cells]
+        sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
+        report = staticscan.scan(sources, self.assignment.rules.forbid) \
+            if self.assignment.rules.forbid else staticscan.ScanFindings()
+        forbidden = forbidden_functions(self.assignment, sources, numbers, report)
+        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
+        call_timeout = self.options.call_timeout or self.assignment.call_timeout
+        budget = self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+        # RLIMIT_CPU is the kernel's last word on one process: never below the budget the
+        # engine itself enforces, so an honest slow submission meets the engine's message.
+        limits = self.policy.limits
+        policy = replace(self.policy, limits=replace(
+            limits, cpu_seconds=max(limits.cpu_seconds, int(budget) + 5)))
+        session = StudentProcess(
+            slot=self._slot, cells=cells, data_files=self._data_files(), policy=policy,
+            notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
+            cpu_budget=budget,
+            forbid=self.assignment.rules.to_wire())
+        # The checks are collected while a warm worker that is not running yet (the
+        # first submission, or after a crash) starts and imports its libraries.
+        self._slot.start(wait=False)
+        self._check_session(self._context(session, (), forbidden, seed, out_dir), digest)
+        # This thread and the child take turns (a call waits for its answer): on the
+        # slot's core, a message does not have to wake another core (autograder.sandbox.affinity).
+        with affinity.on_core(self._slot.core):
+            try:
+                run = session.start()
+                tests = self._run_checks(session, run.functions, forbidden, seed, out_dir,
+                                         digest)
+            finally:
+                session.close()
+        outcome = ("timeout" if run.timed_out_cells else
+                   "crashed" if run.crashed or run.crashed_cells else "graded")
+        result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)
+        return replace(result, stdout=run.stdout,
+                       notes=tuple(run.notes) + tuple(notebook.warnings) + review_notes(report, numbers),
+                       cpu_seconds=round(session.cpu_seconds, 3),
+                       cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
+                                         for c in run.cells if not c.ok))
+
+    def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
+                    seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:
+        context = self._context(target, functions, forbidden, seed, out_dir)
+        checks = self._check_session(context, digest)
+        try:
+            run = checks.run(context)
+        except BaseException:
+            # A run that failed (an engine error, Ctrl-C) may have left fixtures set up or
+            # items half run: that session is dropped, the next submission collects anew.
+            self._checks = None
+            checks.discard()
+            raise
+        if out_dir is not None and run.instructor_log:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            (out_dir / "grader.log").write_text("\n\n".join(run.instructor_log))
+        return run.results
+
+    def _context(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
+                 seed: int, out_dir: Path | None) -> CheckContext:
+        return CheckContext(
+            target=target, functions=tuple(functions), forbidden=forbidden,
+            call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
+            hidden_root=self.assignment.root / "checks" / "hidden",
+            attachments=(out_dir / "images") if out_dir is not None else None)
+
+    def _check_session(self, context: CheckContext, digest: str) -> CheckSuite:
+        """The pytest session of the checks: kept while the assignment folder is unchanged.
+
+        A check file, a helper or a data file edited since the session was collected
+        (``digest``, the assignment digest that keys every result, moved) closes it
+        and collects the checks from disk again.
+        """
+        if self._checks is not None and self._checks_digest != digest:
+            self._close_checks()
+        if self._checks is None:
+            self._checks = CheckSuite(self.check_files, self.assignment.root,
+                                        name=self.assignment.name, context=context)
+            self._checks_digest = digest
+        return self._checks
+
+    def _data_files(self) -> list[tuple[Path, str]]:
+        root = self.assignment.root
+        return [(p, str(p.relative_to(root))) for p in self.assignment.data_files]
+
+    def _excluded_paths(self, out_dir: Path | None = None) -> list[Path]:
+        """Trees the worker must never read: the assignment, the grader, other results."""
+        roots = {self.assignment.root.resolve(), self.assignment.root.resolve().parent}
+        if out_dir is not None:  # the batch's result folder: every student's results
+            roots.add(out_dir.resolve().parent)
+        roots.update(forbidden_module_paths(self.assignment))
+        package = Path(autograder.__file__).resolve().parent
+        roots.add(package)
+        if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
+            roots.add(package.parent)
+        return sorted(roots)
+
+
+@functools.lru_cache(maxsize=32)
+def _module_paths(names: tuple[str, ...]) -> tuple[Path, ...]:
+    found: list[Path] = []
+    for name in names:
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError, AttributeError):  # not installed, or an attribute
+            continue
+        if spec is None:
+            continue
+        if spec.submodule_search_locations:
+            found += [Path(p).resolve() for p in spec.submodule_search_locations]
+        elif spec.origin and os.path.isabs(spec.origin):
+            found.append(Path(spec.origin).resolve())
+    return tuple(found)
+
+
+def forbidden_module_paths(assignment: Assignment) -> tuple[Path, ...]:
+    """Files and folders of the forbidden modules, kept out of the worker's reach.
+
+    Names an allowed library needs inside (``[rules] internal_use``) stay readable.
+    """
+    rules = assignment.rules
+    return _module_paths(tuple(n for n in rules.forbid if n not in rules.internal_use))
+
+
+#: how a note that asks for a person starts (the class summary lists such submissions)
+REVIEW_PREFIX = "For the instructor: "
+
+
+def review_notes(report: staticscan.ScanFindings, cell_numbers: Sequence[int]) -> tuple[str, ...]:
+    """Notes for the "needs a person" list: code the scan could not verify.
+
+    The worker's guard still blocks forbidden libraries at run time whatever the
+    spelling; these notes let a person see why the scan could not tell.
+    """
+    if not report.dynamic:
+        return ()
+    places = "; ".join(
+        f"`{use.name}` in cell {(cell_numbers[use.cell] if use.cell < len(cell_numbers) else use.cell) + 1}"
+        f", line {use.line}" for use in report.dynamic[:5])
+    reaching = ", ".join(sorted(report.unverified)[:10]) or "no top-level function"
+    return (f"{REVIEW_PREFIX}the code scan could not verify {len(report.dynamic)} place(s) "
+            f"({places}); reached from: {reaching}.",)
+
+
+def forbidden_functions(assignment: Assignment, sources: Sequence[str],
+                        cell_numbers: Sequence[int],
+                        report: staticscan.ScanFindings | None = None) -> dict[str, str]:
+    """Map each student function that uses a forbidden name to the message for it."""
+    if not assignment.rules.forbid:
+        return {}
+    report = report or staticscan.scan(sources, assignment.rules.forbid)
+    messages: dict[str, str] = {}
+    for function in sorted(report.tainted):
+        use = next((u for u in report.uses if u.function == function), None) or \
+            next((u for u in report.uses if u.function is not None), None)
+        where = ""
+        if use is not None:
+            cell = cell_numbers[use.cell] if use.cell < len(cell_numbers) else use.cell
+            where = f" (`{use.name}` in cell {cell + 1}, line {use.line})"
+        messages[function] = (f"`{function}` uses a name this assignment does not allow{where}. "
+                              f"{assignment.rules.reason}")
+    return messages
+
+
+def summarise_run(run: NotebookRun, notebook: Notebook) -> str:
+    """The student-facing summary of how the notebook ran."""
+    parts = [f"Your notebook's {len(notebook.cells)} code cell(s) ran in {run.seconds:.1f} s."]
+    if not notebook.cells:
+        parts = ["Your notebook has no code to run: did you submit the right file?"]
+    for index in run.timed_out_cells:
+        parts.append(f"Cell {index + 1} did not finish within the time limit and was skipped; "
+                     "the cells after it ran without it.")
+    for index in run.crashed_cells:
+        parts.append(f"Cell {index + 1} stopped the worker (it exited, hit a memory or CPU limit, "
+                     "or broke its connection to the grader) and was skipped; the cells after it "
+                     "ran without it.")
+    errors = [c for c in run.cells if not c.ok]
+    if errors:
+        listed = "; ".join(f"cell {c.index + 1} ({c.ename}: {c.evalue[:120]})" for c in errors[:5])
+        parts.append(f"{len(errors)} cell(s) raised an error: {listed}.")
+    if run.crashed:
+        parts.append("The worker running your notebook stopped (it exited, or hit a memory "
+                     "or CPU limit); checks that needed it were scored zero.")
+    return " ".join(parts)
+
+
+def _result(assignment: str, outcome: Any, output: str, tests: tuple[CheckResult, ...],
+            seed: int) -> SubmissionResult:
+    return SubmissionResult(id="", source="", assignment=assignment, key="", sha256="",
+                            outcome=outcome, output=output, tests=tests, execution_time=0.0,
+                            seed=seed)
+
+
+def _require_regular_file(path: Path) -> None:
+    """Refuse links and special files: a submission is the student's own regular file.
+
+    A link could name any file the grader can read (the instructor notebook, a
+    classmate's submission); a FIFO or device could block or never end.
+    """
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        raise NotebookError(f"{path.name!r} does not exist. Submit your .ipynb notebook file.",
+                            kind="unreadable") from None
+    except OSError as exc:
+        raise NotebookError(f"{path.name!r} could not be read ({exc.strerror}). Submit it again.",
+                            kind="unreadable") from None
+    if stat.S_ISLNK(mode):
+        raise NotebookError("This submission is a symbolic link, not a notebook file; submit "
+                            "the .ipynb file itself.", kind="not-regular")
+    if not stat.S_ISREG(mode):
+        raise NotebookError("This submission is not a regular file (a folder, pipe or device); "
+                            "submit the .ipynb file itself.", kind="not-regular")
+
+
+def _file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as exc:
+        digest.update(f"unreadable:{exc}".encode())
+    return digest.hexdigest()
+
+
+__all__ = ["ENGINE_VERSION", "REVIEW_PREFIX", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
+           "forget_check_modules",
+           "forbidden_functions", "review_notes", "submission_key", "submission_seed",
+           "summarise_run"]
+
+
+def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException | str) -> SubmissionResult:
+    if isinstance(exc, BaseException):
+        detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+    else:
+        detail = exc
+    return SubmissionResult(
+        id=sub_id, source=str(path), assignment=assignment.name, key="",
+        sha256=_file_sha256(path), outcome="error",
+        output=f"The grader failed on this submission ({detail}); it will be regraded on the next run.",
+        tests=(), execution_time=0.0, seed=0)
+
+
+def client_key(path: Path, assignment: Assignment, options: GradingOptions) -> str:
+    """The key a result of ``path`` must carry to be reused (computed where the file is)."""
+    return submission_key(_file_sha256(path), assignment, options)

@@ -1,0 +1,201 @@
+"""The ``student`` object that checks call: every attribute is a function across the boundary.
+
+``student.convex_hull(points)`` sends the call to the sandboxed worker with a
+time limit and returns the value rebuilt as plain data on this side.
+
+Functions cross both ways without their code: a callable a check passes (at
+any depth of lists, tuples and dicts) is registered in a
+:class:`~autograder.engine.callbacks.CallbackRegistry` for that call and evaluated
+here when the student's code calls it; a function the student returns comes
+back as a :class:`StudentFunction`, which calls into the worker when called,
+with the same time limit, and dies with the submission.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol
+
+from autograder.boundary import protocol
+from autograder.engine.callbacks import CallbackRegistry, limit_message
+from autograder.errors import (
+    ForbiddenUse,
+    MissingFunction,
+    StudentError,
+    StudentException,
+    UnsupportedValue,
+    UsageError,
+    WorkerCrashed,
+)
+
+__all__ = ["CallLog", "CallTarget", "Student", "StudentFunction"]
+
+
+class CallTarget(Protocol):
+    """What the proxy needs from a session (a real worker or an unreadable notebook).
+
+    A session that can answer callbacks also has an ``on_callback`` attribute and a
+    ``request(message, *, timeout, what)`` method (see :mod:`autograder.engine.slot`).
+    """
+
+    def call(self, name: str, args: Any, kwargs: dict[str, Any], *, timeout: float,
+             figures: bool = False) -> tuple[Any, list[Any]]: ...
+
+    def figures(self, *, timeout: float) -> list[Any]: ...
+
+
+@dataclass
+class CallLog:
+    """Which student functions the current check called (for the forbidden-name rule)."""
+
+    names: list[str] = field(default_factory=list)
+    #: a call into the worker is running (a check's function, answering a callback,
+    #: must not call the student's code: the worker is waiting for its answer)
+    busy: bool = False
+
+
+class Student:
+    """Proxy for the submitted notebook's top-level functions."""
+
+    def __init__(self, target: CallTarget, *, timeout: float, functions: tuple[str, ...],
+                 forbidden: dict[str, str], log: CallLog) -> None:
+        self._target = target
+        self._timeout = timeout
+        self._functions = functions
+        self._forbidden = forbidden
+        self._log = log
+
+    def __getattr__(self, name: str) -> Callable[..., Any]:
+        if name.startswith("_"):
+            raise AttributeError(name)
+
+        def call(*args: Any, **kwargs: Any) -> Any:
+            value, _ = self.call(name, *args, **kwargs)
+            return value
+
+        call.__name__ = name
+        return call
+
+    def has(self, name: str) -> bool:
+        """Whether the notebook defined a callable called ``name``."""
+        return name in self._functions
+
+    def call(self, name: str, *args: Any, timeout: float | None = None,
+             figures: bool = False, **kwargs: Any) -> tuple[Any, list[Any]]:
+        """Call ``name``; return ``(value, figures created during the call)``."""
+        self._log.names.append(name)
+        if name in self._forbidden:
+            raise ForbiddenUse(self._forbidden[name])
+        if self._functions and name not in self._functions:
+            # Saves a round trip; the worker would say the same.
+            raise MissingFunction(
+                f"Your notebook does not define `{name}`. Define a function with exactly "
+                "this name at the top level of a code cell.")
+        limit = timeout or self._timeout
+
+        def send(a: list[Any], k: dict[str, Any]) -> tuple[Any, list[Any]]:
+            return self._target.call(name, a, k, timeout=limit, figures=figures)
+
+        return self._invoke(send, args, kwargs, what=f"{name}()")
+
+    def figures(self) -> list[Any]:
+        """Data of the figures the notebook left open (one dict per figure)."""
+        return self._target.figures(timeout=self._timeout)
+
+    # -- functions across the boundary ------------------------------------------
+    def _invoke(self, send: Callable[[list[Any], dict[str, Any]], tuple[Any, list[Any]]],
+                args: tuple[Any, ...], kwargs: dict[str, Any], *,
+                what: str) -> tuple[Any, list[Any]]:
+        """Send one call with the check's functions registered for callbacks."""
+        if self._log.busy:
+            raise UsageError(
+                f"{what} was called from inside a function given to student code; a check's "
+                "function runs while the student's call waits for it and cannot call the "
+                "student's code. Call it before or after.")
+        registry = CallbackRegistry(own_ref=self._own_ref)
+        plain_args = registry.export(list(args))
+        plain_kwargs = registry.export(dict(kwargs))
+        answers = hasattr(self._target, "on_callback")
+        previous = getattr(self._target, "on_callback", None)
+        if answers:
+            self._target.on_callback = registry.answer  # type: ignore[attr-defined]
+        self._log.busy = True
+        try:
+            value, figures = send(plain_args, plain_kwargs)
+        except StudentError:
+            if registry.check_error is not None:  # the student's code only saw its effect
+                raise registry.check_error from None
+            raise
+        finally:
+            self._log.busy = False
+            if answers:
+                self._target.on_callback = previous  # type: ignore[attr-defined]
+        if registry.check_error is not None:
+            raise registry.check_error
+        if registry.exceeded:
+            name = next(iter(registry.functions.values())).name
+            raise StudentException(f"{what}: " + limit_message(name, registry.max_callbacks))
+        returned = f"the function returned by {what}"
+        value = protocol.replace_refs(value, lambda ref: StudentFunction(self, ref, returned))
+        return value, figures
+
+    def _own_ref(self, value: object) -> protocol.CallableRef | None:
+        if isinstance(value, StudentFunction) and value._student is self:
+            return value._ref
+        return None
+
+    def _call_ref(self, ref: protocol.CallableRef, args: list[Any], kwargs: dict[str, Any],
+                  what: str) -> tuple[Any, list[Any]]:
+        request = getattr(self._target, "request", None)
+        if request is None:
+            raise WorkerCrashed(f"{what} cannot be called: the notebook is not running.")
+        answer = request({"op": "call-ref", "id": ref.id, "args": args, "kwargs": kwargs},
+                         timeout=self._timeout, what=what)
+        if not answer.get("ok"):
+            raise _ref_error(what, answer)
+        value = answer.get("value")
+        if isinstance(value, protocol.Unsupported):
+            raise UnsupportedValue(f"{what} returned a {value.type}, which the grader cannot "
+                                   "read: return a number, a list or tuple of numbers, or a "
+                                   "numpy array.")
+        return value, []
+
+
+class StudentFunction:
+    """A function the student's code returned; calling it runs it in the worker.
+
+    Each call has the same time limit as a call of a top-level function, and
+    raises the same errors (:class:`~autograder.errors.StudentException` when the
+    student's code raised, and so on). It works while the submission's worker
+    runs, that is, during the checks of this submission.
+    """
+
+    def __init__(self, student: Student, ref: protocol.CallableRef, what: str) -> None:
+        self._student = student
+        self._ref = ref
+        #: how messages name it: "the function returned by make_interpolant()"
+        self.what = what
+
+    def __repr__(self) -> str:
+        return f"<{self.what}>"
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        def send(a: list[Any], k: dict[str, Any]) -> tuple[Any, list[Any]]:
+            return self._student._call_ref(self._ref, a, k, self.what)
+
+        value, _ = self._student._invoke(send, args, kwargs, what=self.what)
+        return value
+
+
+def _ref_error(what: str, answer: dict[str, Any]) -> Exception:
+    error = answer.get("error")
+    if error == "exception":
+        return StudentException(f"{what} raised {answer.get('type')}: {answer.get('message', '')}",
+                                traceback=str(answer.get("traceback", "")))
+    if error == "unsupported":
+        return UnsupportedValue(f"{what} returned a value the grader cannot read "
+                                f"({answer.get('message')}).")
+    if error == "stale-ref":
+        return WorkerCrashed(f"{what} is gone: your notebook's worker was restarted after "
+                             "an earlier call stopped it.")
+    return WorkerCrashed(f"{what}: the worker answered {error!r}.")

@@ -1,0 +1,242 @@
+"""The local backend: this process grades as one slot, a pool of slot processes beside it (``--jobs N``).
+
+Each slot holds one :class:`Grader` and its warm worker and grades one file at a
+time, writing the result's files itself (same machine, same file system). This
+process is slot 0: it starts its warm worker first and collects the checks while
+the worker imports its libraries; only once that worker is ready are the pool's
+``N - 1`` slot processes started (spawned: each imports the engine and starts a
+warm worker of its own), and a pool process gets a file only once it is ready
+itself. On a machine with few cores the first result then waits for one slot's
+start-up, not for every slot's at once, and a small batch never waits for the
+pool. Every slot takes the next file when it is free.
+"""
+
+from __future__ import annotations
+
+import collections
+import multiprocessing
+import multiprocessing.util
+import os
+import sys
+import threading
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Any, Sequence
+
+from autograder.engine.assignment import Assignment, load_assignment
+from autograder.engine.grader import Grader, GradingOptions, error_result
+from autograder.engine.slot import GradingSlot
+from autograder.results.model import SubmissionResult
+from autograder.results.store import write_submission
+from autograder.runners.jobs import Finished, Job
+from autograder.sandbox.confine import probe_support
+
+# One Grader per pool process: the warm worker is the point of the pool. This is the
+# package's only module-level state, and it lives only in pool processes.
+_GRADER: Grader | None = None
+
+
+def grade_one(grader: Grader, path: Path, sub_id: str, out_dir: Path) -> SubmissionResult:
+    """Grade one file into ``out_dir/<id>/``; a grader failure becomes an "error" result."""
+    folder = out_dir / sub_id
+    try:
+        return grader.grade(path, id=sub_id, out_dir=folder)
+    except Exception as exc:  # the grader's own failure: record it, never lose the file
+        return write_submission(folder, error_result(grader.assignment, path, sub_id, exc),
+                                title=grader.assignment.title)
+
+
+def _init_slot(assignment_root: str, options: GradingOptions, counter: Any) -> None:
+    global _GRADER
+    with counter.get_lock():
+        slot = counter.value
+        counter.value += 1
+    _GRADER = Grader(load_assignment(Path(assignment_root)), options, slot=slot)
+    # A pool process ends through os._exit, which skips atexit: multiprocessing's own
+    # exit finalizers are what run there. Without this the slot's warm worker and its
+    # home folder (``autograder-slot-*``) outlived every ``--jobs N`` run.
+    multiprocessing.util.Finalize(_GRADER, _GRADER.close, exitpriority=10)
+    _GRADER.prepare()
+
+
+def _slot_ready() -> bool:
+    return _GRADER is not None
+
+
+def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
+    assert _GRADER is not None
+    return grade_one(_GRADER, Path(path), sub_id, Path(out_dir)).to_dict()
+
+
+class LocalBackend:
+    """``jobs`` slots (default: the number of cores); slot 0 runs in this process.
+
+    ``worker``, a slot whose warm parent was started ahead, is slot 0's.
+    """
+
+    def __init__(self, jobs: int | None = None, *, worker: GradingSlot | None = None) -> None:
+        self.jobs = jobs
+        self.worker = worker
+
+    def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
+            out_dir: Path, finished: Finished) -> None:
+        slots = max(1, min(self.jobs or os.cpu_count() or 1, len(jobs) or 1))
+        queue = _Queue(jobs)
+        with Grader(assignment, options, worker=self.worker) as grader:
+            grader.prepare()
+            if slots == 1:
+                while (job := queue.take()) is not None:
+                    finished(grade_one(grader, job.path, job.id, out_dir))
+                return
+            # Cached from here on: the sweep after a submission may probe the sandbox, which
+            # forks this process, and a fork is safest before the pool's threads exist.
+            probe_support()
+            _grade_beside_pool(grader, options, slots - 1, queue, out_dir, finished)
+
+
+class _Queue:
+    """The jobs no slot has taken yet, shared by this process's slot and the pool's feeder."""
+
+    def __init__(self, jobs: Sequence[Job]) -> None:
+        self._jobs = collections.deque(jobs)
+        self._lock = threading.Lock()
+        self._closed = False
+
+    def take(self) -> Job | None:
+        with self._lock:
+            return self._jobs.popleft() if self._jobs and not self._closed else None
+
+    def give_back(self, job: Job) -> None:
+        with self._lock:
+            if not self._closed:
+                self._jobs.appendleft(job)
+
+    def __bool__(self) -> bool:
+        with self._lock:
+            return bool(self._jobs) and not self._closed
+
+    def close(self) -> None:
+        """Hand out nothing more (Ctrl-C, or a failure in another slot)."""
+        with self._lock:
+            self._closed = True
+            self._jobs.clear()
+
+
+def _grade_beside_pool(grader: Grader, options: GradingOptions, processes: int, queue: _Queue,
+                       out_dir: Path, finished: Finished) -> None:
+    """Grade in this thread while a feeder thread keeps ``processes`` pool processes busy."""
+    lock = threading.Lock()
+
+    def report(result: SubmissionResult) -> None:
+        with lock:
+            finished(result)
+
+    feeder = _PoolFeeder(grader.assignment, options, processes, queue, out_dir, report)
+    feeder.start()
+    try:
+        while (job := queue.take()) is not None:
+            report(grade_one(grader, job.path, job.id, out_dir))
+    except BaseException:
+        queue.close()  # the pool finishes the files it holds (whole results), and stops
+        raise
+    finally:
+        feeder.join()
+    if feeder.failure is not None:
+        raise feeder.failure
+
+
+class _PoolFeeder(threading.Thread):
+    """Hands a job to a pool process only once that process is ready (warm), one job each.
+
+    Until then this process's slot takes every job, so a small batch never waits for
+    the pool's start-up. If a slot process dies, the pool is rebuilt and its job is
+    retried once (a second death is an "error" result for that job); a pool that
+    broke before any of its processes was ready is not rebuilt, and this process's
+    slot grades what is left.
+    """
+
+    def __init__(self, assignment: Assignment, options: GradingOptions, processes: int,
+                 queue: _Queue, out_dir: Path, report: Finished) -> None:
+        super().__init__(name="autograder-pool-feeder", daemon=True)
+        self._assignment, self._options, self._processes = assignment, options, processes
+        self._queue, self._out_dir, self._report = queue, out_dir, report
+        self._attempts: dict[str, int] = {}
+        self.failure: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            while self._one_pool():
+                pass
+        except BaseException as exc:  # the pool itself could not be run
+            self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        """Stop handing out jobs; ``exc`` is raised again in the thread that runs the batch."""
+        if self.failure is None:
+            self.failure = exc
+        self._queue.close()
+
+    def _one_pool(self) -> bool:
+        """Feed one pool until no job is left; True when it broke and is worth rebuilding."""
+        if not self._queue:
+            return False
+        context = multiprocessing.get_context("spawn")
+        try:
+            counter = context.Value("i", 1)  # slot 0 is this process's
+            pool = ProcessPoolExecutor(max_workers=self._processes, mp_context=context,
+                                       initializer=_init_slot,
+                                       initargs=(str(self._assignment.root), self._options,
+                                                 counter))
+            try:
+                # A call runs once its process's initializer is done: its answer says "ready".
+                running: dict[Future[Any], Job | None] = {
+                    pool.submit(_slot_ready): None for _ in range(self._processes)}
+            except BaseException:
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+        except OSError as exc:
+            # multiprocessing could not set the pool up (seen once in CI: its resource
+            # tracker's pipe was broken): nothing is lost, this process's slot grades
+            # every file that is left, and the instructor is told why it is slower.
+            print(f"autograder: could not start {self._processes} more grading "
+                  f"process(es) ({type(exc).__name__}: {exc}); this process grades every "
+                  "remaining submission.", file=sys.stderr, flush=True)
+            return False
+        with pool:
+            broken = ready = False
+            while running:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in done:
+                    job = running.pop(future)
+                    died = self._collect(future, job)
+                    broken = broken or died
+                    ready = ready or (job is None and not died)
+                    if not broken and (job := self._queue.take()) is not None:
+                        running[pool.submit(_grade_in_slot, str(job.path), job.id,
+                                            str(self._out_dir))] = job
+            return broken and ready
+
+    def _collect(self, future: Future[Any], job: Job | None) -> bool:
+        """Report ``job``'s result (None: a ready call); True when its slot process died."""
+        try:
+            try:
+                answer = future.result()
+            except BrokenProcessPool as exc:
+                if job is None:
+                    return True
+                self._attempts[job.id] = self._attempts.get(job.id, 0) + 1
+                if self._attempts[job.id] < 2:
+                    self._queue.give_back(job)
+                    return True
+                self._report(write_submission(self._out_dir / job.id, error_result(
+                    self._assignment, job.path, job.id, exc), title=self._assignment.title))
+                return True
+            if job is not None:
+                self._report(SubmissionResult.from_dict(answer))
+        except BaseException as exc:  # Ctrl-C in a slot process, or ``finished`` failed:
+            self._fail(exc)  # the results of the other files still running are reported
+        return False
+
+
+__all__ = ["LocalBackend"]
