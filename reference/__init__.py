@@ -39,7 +39,7 @@ from reference._bezier import bernstein, bezier, de_casteljau, split
 from reference._data import CAR_STROKE_NAMES, car, load_strokes, save_car
 from reference._delaunay import delaunay, incircle, incircle_many, is_delaunay
 from reference._geometry import convex_hull, orient2d, orient2d_many
-from reference._interpolation import (
+from reference._barycentric import (
     barycentric_interpolate,
     barycentric_weights,
     chebyshev_nodes,

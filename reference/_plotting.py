@@ -29,7 +29,7 @@ from reference._validation import (
 from reference._bezier import bezier, de_casteljau
 from reference._data import car
 from reference._geometry import convex_hull
-from reference._interpolation import barycentric_interpolate
+from reference._barycentric import barycentric_interpolate
 from reference._splines import parametric_spline
 
 __all__ = [

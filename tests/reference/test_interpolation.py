@@ -25,7 +25,7 @@ from reference import (
     lebesgue_constant,
 )
 
-interp = importlib.import_module("reference._interpolation")
+interp = importlib.import_module("reference._barycentric")
 TINY = sys.float_info.min
 
 

@@ -23,7 +23,7 @@ def test_every_module_is_private():
     public = [info.name for info in pkgutil.iter_modules(reference.__path__)
               if not info.name.startswith("_")]  # fmt: skip
     assert public == [], f"public modules {public}: implementation belongs in _modules"
-    assert {"_geometry", "_interpolation", "_bezier", "_splines", "_delaunay",
+    assert {"_geometry", "_barycentric", "_bezier", "_splines", "_delaunay",
             "_plotting", "_data", "_validation"} <= set(PRIVATE_MODULES)  # fmt: skip
 
 
