@@ -35,20 +35,15 @@ coordinates of any size a double can hold are used exactly by the geometric
 predicates.
 """
 
+from reference._barycentric import barycentric_interpolate
 from reference._bezier import bernstein, bezier, de_casteljau, split
 from reference._data import CAR_STROKE_NAMES, car, load_strokes, save_car
 from reference._delaunay import delaunay, incircle, incircle_many, is_delaunay
 from reference._geometry import convex_hull, orient2d, orient2d_many
-from reference._barycentric import (
-    barycentric_interpolate,
-    barycentric_weights,
-    chebyshev_nodes,
-    chebyshev_weights,
-    equispaced_nodes,
-    equispaced_weights,
-    lebesgue_constant,
-)
+from reference._lebesgue import lebesgue_constant
+from reference._nodes import chebyshev_nodes, equispaced_nodes
 from reference._splines import CubicSpline, ParametricSpline, parametric_spline
+from reference._weights import barycentric_weights, chebyshev_weights, equispaced_weights
 
 __all__ = [
     # geometry

@@ -1,120 +1,47 @@
-"""Polynomial interpolation in barycentric form: nodes, weights, evaluation.
+"""Evaluation of the polynomial interpolant in barycentric form.
 
 Model solutions for the interpolation part of the geometry-and-interpolation
-lecture (its ``LagrangeInterp1D``, ``EquispacedNodes`` and
-``EquispacedBarWeights`` demo and the Runge phenomenon it shows).
+lecture (its ``LagrangeInterp1D`` demo and the Runge phenomenon it shows).
 
 Public functions
 ----------------
-equispaced_nodes, chebyshev_nodes
-    ``n + 1`` nodes on ``[-1, 1]`` in ascending order.
-equispaced_weights, chebyshev_weights, barycentric_weights
-    Barycentric weights, for the two node families in closed form and for any
-    distinct nodes by the product formula.
 barycentric_interpolate
     The second (true) barycentric formula, vectorised and evaluated in chunks;
     outside the nodes the first form and the Newton form (see its Notes).
-lebesgue_constant
-    The maximum of the Lebesgue function between the extreme nodes.
 
-Conventions shared by every function here: weights have an arbitrary common
-scale (the barycentric formula does not see it); the weights this module
-computes are scaled so that ``max |w| == 1`` and the weight of the leftmost
-node is positive, so for ascending nodes the signs are ``(-1)**j``. Weights
-whose exact value would fall below the smallest normal double
-(``sys.float_info.min``, about ``2.2e-308``) are returned as that value with
-the right sign, so that every weight is finite, non-zero and normal.
+The nodes and weights it takes come from :mod:`reference._nodes` and
+:mod:`reference._weights`. The evaluation in chunks (:func:`_chunks`) and the
+rescaled terms next to a node (:func:`_rescaled_terms`) also serve the
+Lebesgue function of :mod:`reference._lebesgue`.
 """
 
 from __future__ import annotations
 
-import math
-import numbers
-import sys
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from reference._validation import (
-    as_abscissae,
-    as_finite_array,
-    as_nonnegative_int,
-    shift_parameter,
-)
+from reference._validation import as_finite_array, as_nodes, as_weights, shift_parameter
+from reference._weights import barycentric_weights
 
 __all__ = [
-    "equispaced_nodes",
-    "chebyshev_nodes",
-    "equispaced_weights",
-    "chebyshev_weights",
-    "barycentric_weights",
     "barycentric_interpolate",
-    "lebesgue_constant",
 ]
 
 #: Unit roundoff of IEEE binary64.
 _UNIT_ROUNDOFF = 2.0**-53
-#: Smallest positive normal double: the floor for the magnitude of a weight.
-_TINY = sys.float_info.min
 #: Evaluation points per chunk (at most); bounds the temporary matrix. Chunks
 #: of 2**11 to 2**14 points run equally fast (within 15 %); smaller ones stay in
 #: cache.
 _CHUNK_POINTS = 2**12
 #: Elements of the (points x nodes) temporary per chunk (at most): 4 MiB.
 _CHUNK_ELEMENTS = 2**19
-#: Interior samples of the Lebesgue function on the whole interval (at least).
-_LEBESGUE_SAMPLES = 4096
-#: Interior samples per gap between consecutive nodes (at least).
-_LEBESGUE_PER_GAP = 16
-#: Golden-section steps refining the maximum inside each gap.
-_GOLDEN_STEPS = 48
 
 
 # --------------------------------------------------------------------------
-# Validation helpers private to this module
+# Validation helper private to this module
 # --------------------------------------------------------------------------
-
-
-def _as_degree(n: Any) -> int:
-    return as_nonnegative_int(n, "n", minimum=1)
-
-
-def _as_kind(kind: Any) -> int:
-    if isinstance(kind, bool) or not isinstance(kind, numbers.Integral) or kind not in (1, 2):
-        raise ValueError(
-            f"`kind` must be 1 (Chebyshev points of the first kind, the roots) or "
-            f"2 (of the second kind, the extrema); got {kind!r}."
-        )
-    return int(kind)
-
-
-def _as_nodes(nodes: ArrayLike) -> tuple[NDArray[np.float64], int]:
-    """Finite, non-empty, 1-D, pairwise distinct nodes (any order), and their origin.
-
-    Integers beyond ``2**53`` are shifted by an integer origin first (see
-    :func:`reference._validation.as_abscissae`), so distinct integers stay
-    distinct; the interpolant is translation invariant.
-    """
-    x, origin = as_abscissae(nodes, "nodes", ndim=1)
-    if x.size == 0:
-        raise ValueError("`nodes` must hold at least one node; got an empty array.")
-    order = np.argsort(x, kind="stable")
-    same = np.flatnonzero(x[order[1:]] == x[order[:-1]])
-    if same.size:
-        i, j = sorted((int(order[same[0]]), int(order[same[0] + 1])))
-        if origin:
-            raise ValueError(
-                f"`nodes` must be distinct in double precision; nodes[{i}] and "
-                f"nodes[{j}] are distinct integers, but the nodes span too wide a range "
-                "for their differences to be told apart as doubles. Rescale the nodes."
-            )
-        raise ValueError(
-            f"`nodes` must be pairwise distinct; "
-            f"nodes[{i}] == nodes[{j}] == {float(x[i])!r}."
-        )
-    return x, origin
 
 
 def _as_values(values: ArrayLike, n_nodes: int) -> NDArray[np.float64]:
@@ -126,378 +53,6 @@ def _as_values(values: ArrayLike, n_nodes: int) -> NDArray[np.float64]:
             f"node; got {y.shape}."
         )
     return y.reshape(n_nodes, -1)
-
-
-def _as_weights(weights: ArrayLike | None, x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Validated weights, rescaled by a power of two so that max |w| is in [0.5, 1).
-
-    The rescaling is exact (barring weights spanning more than the whole
-    exponent range) and harmless, since the formula ignores a common factor;
-    it keeps ``w / (t - x_j)`` away from overflow for user weights such as
-    the lecture's raw binomial coefficients.
-    """
-    if weights is None:
-        return barycentric_weights(x)
-    w = as_finite_array(weights, "weights", ndim=1)
-    if w.shape != x.shape:
-        raise ValueError(
-            f"`weights` must have one entry per node, shape {x.shape}; got {w.shape}."
-        )
-    zero = np.flatnonzero(w == 0)
-    if zero.size:
-        raise ValueError(
-            f"`weights` must be non-zero (a zero weight drops its node); "
-            f"weights[{int(zero[0])}] == 0."
-        )
-    _, top = np.frexp(np.max(np.abs(w)))
-    return np.ldexp(w, -int(top))
-
-
-# --------------------------------------------------------------------------
-# Nodes
-# --------------------------------------------------------------------------
-
-
-def _odd_sine_nodes(n: int, denominator: int) -> NDArray[np.float64]:
-    """``sin(pi * k / denominator)`` for ``k = -n, -n + 2, ..., n``, exactly odd."""
-    k = np.arange(-n, n + 1, 2)
-    return np.sign(k) * np.sin(np.pi * np.abs(k) / denominator)
-
-
-def equispaced_nodes(n: int) -> NDArray[np.float64]:
-    """Return the ``n + 1`` equispaced nodes ``x_j = -1 + 2 j / n`` on ``[-1, 1]``.
-
-    Parameters
-    ----------
-    n : int
-        Polynomial degree, ``n >= 1``.
-
-    Returns
-    -------
-    nodes : ndarray of shape (n + 1,)
-        Ascending nodes; ``nodes[0] == -1``, ``nodes[-1] == 1`` and
-        ``nodes[n - j] == -nodes[j]`` hold exactly.
-
-    Raises
-    ------
-    ValueError
-        If ``n`` is not an integer ``>= 1``.
-
-    Notes
-    -----
-    Each node is computed as ``(2 j - n) / n``: the numerator is an exact
-    integer and the division is correctly rounded, which makes the set exactly
-    symmetric about 0 and hits ``0`` exactly when ``n`` is even. ``n = 0``
-    (a single node) is rejected, as in :func:`chebyshev_nodes`, since the
-    family is not defined by a degree-0 formula; pass ``[0.0]`` to
-    :func:`barycentric_interpolate` directly for a constant interpolant.
-
-    Interpolation in these nodes is exponentially ill-conditioned: the
-    Lebesgue constant grows like ``2**(n + 1) / (e n log n)`` (Runge's
-    phenomenon, see :func:`lebesgue_constant`).
-
-    References
-    ----------
-    .. [1] J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange
-       interpolation", SIAM Review 46(3), 501-517, 2004.
-       :doi:`10.1137/S0036144502417715`
-
-    Examples
-    --------
-    >>> from reference import equispaced_nodes
-    >>> equispaced_nodes(4).tolist()
-    [-1.0, -0.5, 0.0, 0.5, 1.0]
-    """
-    n = _as_degree(n)
-    j = np.arange(n + 1, dtype=np.float64)
-    return (2.0 * j - n) / n
-
-
-def chebyshev_nodes(n: int, kind: int = 2) -> NDArray[np.float64]:
-    """Return ``n + 1`` Chebyshev points on ``[-1, 1]`` in ascending order.
-
-    Parameters
-    ----------
-    n : int
-        Polynomial degree, ``n >= 1``.
-    kind : {2, 1}, optional
-        ``2`` (default): Chebyshev points of the second kind (the extrema of
-        ``T_n``), ``x_j = -cos(j pi / n)``. ``1``: points of the first kind
-        (the roots of ``T_{n+1}``), ``x_j = -cos((2 j + 1) pi / (2 n + 2))``.
-
-    Returns
-    -------
-    nodes : ndarray of shape (n + 1,)
-        Ascending nodes, exactly symmetric: ``nodes[n - j] == -nodes[j]``.
-        For ``kind=2`` the end points are exactly ``-1.0`` and ``1.0``.
-
-    Raises
-    ------
-    ValueError
-        If ``n`` is not an integer ``>= 1`` or ``kind`` is not 1 or 2.
-
-    Notes
-    -----
-    The cosines are rewritten as sines of a symmetric argument,
-
-    .. math::
-
-        -\\cos\\frac{j\\pi}{n} = \\sin\\frac{(2j - n)\\pi}{2n}, \\qquad
-        -\\cos\\frac{(2j + 1)\\pi}{2n + 2} = \\sin\\frac{(2j - n)\\pi}{2n + 2},
-
-    and the sine is evaluated at ``|2 j - n|`` and given the sign of
-    ``2 j - n``. Hence the nodes are exactly symmetric and the middle node is
-    exactly ``0`` when ``n`` is even (``-cos`` would give ``-6.1e-17``).
-    ``n = 0`` is rejected: ``-cos(0 pi / 0)`` is undefined for ``kind=2``.
-
-    References
-    ----------
-    .. [1] J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange
-       interpolation", SIAM Review 46(3), 501-517, 2004.
-       :doi:`10.1137/S0036144502417715`
-
-    Examples
-    --------
-    >>> from reference import chebyshev_nodes
-    >>> chebyshev_nodes(4).round(6).tolist()
-    [-1.0, -0.707107, 0.0, 0.707107, 1.0]
-    >>> chebyshev_nodes(1, kind=1).round(6).tolist()
-    [-0.707107, 0.707107]
-    """
-    n = _as_degree(n)
-    kind = _as_kind(kind)
-    if kind == 1:
-        return _odd_sine_nodes(n, 2 * n + 2)
-    x = _odd_sine_nodes(n, 2 * n)
-    x[0], x[-1] = -1.0, 1.0
-    return x
-
-
-# --------------------------------------------------------------------------
-# Weights
-# --------------------------------------------------------------------------
-
-
-def _clamp_tiny(w: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Replace weights below the smallest normal double by +-that value."""
-    small = np.abs(w) < _TINY
-    w[small] = np.copysign(_TINY, w[small])
-    return w
-
-
-def equispaced_weights(n: int) -> NDArray[np.float64]:
-    """Return barycentric weights for :func:`equispaced_nodes`, ``max |w| = 1``.
-
-    Parameters
-    ----------
-    n : int
-        Polynomial degree, ``n >= 1``.
-
-    Returns
-    -------
-    weights : ndarray of shape (n + 1,)
-        ``w_j = (-1)**j * C(n, j) / C(n, n // 2)``, each correctly rounded,
-        except that magnitudes below ``sys.float_info.min`` (``2.2e-308``)
-        are returned as ``+-sys.float_info.min``. Always finite and non-zero.
-
-    Raises
-    ------
-    ValueError
-        If ``n`` is not an integer ``>= 1``.
-
-    Notes
-    -----
-    For ``x_j = -1 + 2 j / n`` the weights ``1 / prod_{k != j}(x_j - x_k)``
-    are proportional to ``(-1)**j C(n, j)`` ([1]_). The lecture
-    computes ``binomial(n, j)`` directly, which overflows a double for
-    ``n > 1029``. Here the binomials are exact Python integers, built by the
-    recurrence ``C(n, j + 1) = C(n, j) (n - j) / (j + 1)``, and each ratio
-    ``C(n, j) / C(n, n // 2)`` is formed by Python's correctly rounded
-    integer true division. The cost is ``O(n**2)`` bit operations, a few
-    milliseconds for ``n = 5000`` and about 2 s for ``n = 100000``.
-
-    The smallest ratio, ``C(n, 0) / C(n, n // 2)``, is about
-    ``2**-n sqrt(pi n / 2)``; it stays above the smallest normal double up to
-    ``n = 1027``, so for ``n <= 1027`` every weight is the exact ratio
-    correctly rounded. Beyond that the outermost weights are clamped to
-    ``+-2.2e-308``: they keep their signs and the interpolation property
-    (the second barycentric form with any non-zero weights still reproduces
-    every data value at its node), but the interpolant is then a rational
-    function rather than the polynomial. At such degrees the equispaced
-    polynomial interpolant is meaningless anyway: its Lebesgue constant
-    exceeds ``1e300``.
-
-    References
-    ----------
-    .. [1] J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange
-       interpolation", SIAM Review 46(3), 501-517, 2004.
-       :doi:`10.1137/S0036144502417715`
-
-    Examples
-    --------
-    >>> from reference import equispaced_weights
-    >>> equispaced_weights(4).tolist()
-    [0.16666666666666666, -0.6666666666666666, 1.0, -0.6666666666666666, 0.16666666666666666]
-    >>> w = equispaced_weights(3000)
-    >>> bool(w.min() < 0 < w.max()), float(abs(w).min()) == 2.2250738585072014e-308
-    (True, True)
-    """
-    n = _as_degree(n)
-    half = n // 2
-    binomials = [1]
-    for j in range(half):
-        binomials.append(binomials[-1] * (n - j) // (j + 1))
-    middle = binomials[-1]
-    ratios = [c / middle for c in binomials]  # correctly rounded, may underflow
-    magnitude = np.array(ratios + ratios[n - half - 1 :: -1], dtype=np.float64)
-    sign = np.where(np.arange(n + 1) % 2 == 0, 1.0, -1.0)
-    return _clamp_tiny(sign * magnitude)
-
-
-def chebyshev_weights(n: int, kind: int = 2) -> NDArray[np.float64]:
-    """Return barycentric weights for :func:`chebyshev_nodes` (Salzer's formulas).
-
-    Parameters
-    ----------
-    n : int
-        Polynomial degree, ``n >= 1``.
-    kind : {2, 1}, optional
-        Node family, as in :func:`chebyshev_nodes`.
-
-    Returns
-    -------
-    weights : ndarray of shape (n + 1,)
-        ``kind=2``: ``w_j = (-1)**j``, halved for ``j = 0`` and ``j = n``.
-        ``kind=1``: ``w_j = (-1)**j sin((2 j + 1) pi / (2 n + 2))``.
-        In both cases ``|w_j| <= 1`` and ``|w_j| == |w_{n-j}|`` exactly.
-
-    Raises
-    ------
-    ValueError
-        If ``n`` is not an integer ``>= 1`` or ``kind`` is not 1 or 2.
-
-    Notes
-    -----
-    After cancelling the factors common to all ``j``, the weights
-    ``1 / prod_{k != j}(x_j - x_k)`` of the Chebyshev points reduce to the
-    closed forms above (Salzer [2]_; see also [1]_). They are
-    returned exactly as these formulas (common scale 1, not renormalised):
-    for ``kind=1`` the largest magnitude is ``cos(pi / (2 n + 2))`` when
-    ``n`` is odd. The sine is evaluated as ``cos((2 j - n) pi / (2 n + 2))``
-    at ``|2 j - n|`` so that the weights are exactly symmetric.
-
-    The ratio of the largest to the smallest weight is at most ``2`` (kind 2)
-    or about ``2 (n + 1) / pi`` (kind 1): no overflow or underflow for any
-    ``n``, and interpolation in these points is well conditioned (Lebesgue
-    constant ``~ (2 / pi) log n``).
-
-    References
-    ----------
-    .. [1] J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange
-       interpolation", SIAM Review 46(3), 501-517, 2004.
-       :doi:`10.1137/S0036144502417715`
-    .. [2] H. E. Salzer, "Lagrangian interpolation at the Chebyshev points
-       x_{n,nu} = cos(nu pi / n), nu = 0(1)n; some unnoted advantages",
-       The Computer Journal 15(2), 156-159, 1972. :doi:`10.1093/comjnl/15.2.156`
-
-    Examples
-    --------
-    >>> from reference import chebyshev_weights
-    >>> chebyshev_weights(4).tolist()
-    [0.5, -1.0, 1.0, -1.0, 0.5]
-    >>> chebyshev_weights(2, kind=1).round(6).tolist()
-    [0.5, -1.0, 0.5]
-    """
-    n = _as_degree(n)
-    kind = _as_kind(kind)
-    j = np.arange(n + 1)
-    sign = np.where(j % 2 == 0, 1.0, -1.0)
-    if kind == 1:
-        return sign * np.cos(np.pi * np.abs(2 * j - n) / (2 * n + 2))
-    sign[[0, -1]] *= 0.5
-    return sign
-
-
-def barycentric_weights(nodes: ArrayLike) -> NDArray[np.float64]:
-    """Return barycentric weights for arbitrary distinct nodes, ``max |w| = 1``.
-
-    Parameters
-    ----------
-    nodes : array_like of shape (n + 1,)
-        Pairwise distinct, finite nodes in any order (``n + 1 >= 1``).
-
-    Returns
-    -------
-    weights : ndarray of shape (n + 1,)
-        ``w_j`` proportional to ``1 / prod_{k != j}(x_j - x_k)``, scaled so
-        that ``max |w_j| == 1`` and the weight of the smallest node is
-        positive (for ascending nodes the signs are ``(-1)**j``). Magnitudes
-        below ``sys.float_info.min`` are returned as ``+-sys.float_info.min``.
-        A single node gets the weight ``[1.0]``.
-
-    Raises
-    ------
-    ValueError
-        If ``nodes`` is not a non-empty 1-D array of finite numbers, or if two
-        nodes are equal (the message names both indices).
-
-    Notes
-    -----
-    The weights are ([1]_)
-
-    .. math::
-
-        w_j = \\frac{1}{\\prod_{k \\ne j} (x_j - x_k)} .
-
-    The differences are multiplied by the inverse capacity ``4 / (b - a)``
-    of the interval ``[a, b] = [min x, max x]`` ([1]_, p. 510), rounded to a
-    power of two so that the scaling adds no rounding error. The product is
-    carried as a mantissa and a separate integer exponent (``numpy.frexp``
-    after every factor), the exact form of "log-magnitude and sign": it can
-    neither overflow nor underflow whatever the number or spacing of the
-    nodes, and each product has a relative error of at most about
-    ``n eps`` ([2]_ shows this suffices for the stability of the second
-    barycentric form). The largest weight is then scaled to ``+-1``.
-    Cost: ``O(n**2)`` operations, ``O(n)`` memory.
-
-    References
-    ----------
-    .. [1] J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange
-       interpolation", SIAM Review 46(3), 501-517, 2004.
-       :doi:`10.1137/S0036144502417715`
-    .. [2] N. J. Higham, "The numerical stability of barycentric Lagrange
-       interpolation", IMA Journal of Numerical Analysis 24(4), 547-556,
-       2004. :doi:`10.1093/imanum/24.4.547`
-
-    Examples
-    --------
-    >>> from reference import barycentric_weights
-    >>> barycentric_weights([-1.0, 0.0, 1.0]).tolist()
-    [0.5, -1.0, 0.5]
-    >>> barycentric_weights([0.0, 2.0, 1.0]).tolist()
-    [0.5, 0.5, -1.0]
-    """
-    x, _ = _as_nodes(nodes)
-    if x.size == 1:
-        return np.ones(1)
-    # Inverse capacity 4 / (b - a) rounded to a power of two: exact scaling.
-    _, e = np.frexp(4.0 / (np.max(x) - np.min(x)))
-    mantissa = np.ones_like(x)
-    exponent = np.zeros(x.shape, dtype=np.int64)
-    for k in range(x.size):
-        factor = np.ldexp(x - x[k], int(e) - 1)
-        factor[k] = 1.0
-        mantissa, step = np.frexp(mantissa * factor)
-        exponent += step
-    # 1 / (m 2**e) = (1 / m) 2**-e with 1 / m in (1, 2] in magnitude.
-    inverse, step = np.frexp(1.0 / mantissa)
-    exponent = step - exponent
-    # Largest weight: largest exponent, then largest mantissa (exact comparison).
-    top = int(np.argmax(np.where(exponent == exponent.max(), np.abs(inverse), 0.0)))
-    w = np.ldexp(inverse, exponent - exponent[top]) / abs(inverse[top])
-    if w[np.argmin(x)] < 0:
-        w = -w
-    return _clamp_tiny(w)
 
 
 # --------------------------------------------------------------------------
@@ -845,10 +400,10 @@ def barycentric_interpolate(
     >>> print(barycentric_interpolate([-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], 1e17))
     1e+34
     """
-    x, origin = _as_nodes(nodes)
+    x, origin = as_nodes(nodes)
     y = _as_values(values, x.size)
     tt = shift_parameter(t, "t", origin)
-    w = _as_weights(weights, x)
+    w = barycentric_weights(x) if weights is None else as_weights(weights, x)
     if x.size == 1:  # the constant interpolant, exactly
         result = np.broadcast_to(y[0], tt.shape + y.shape[1:]).reshape(
             tt.shape + np.shape(values)[1:]
@@ -871,151 +426,3 @@ def barycentric_interpolate(
             out[rows] = _interpolate_chunk(x, w, y1, flat[rows], buf)
     result = out.reshape(tt.shape + np.shape(values)[1:])
     return result[()] if result.ndim == 0 else result
-
-
-# --------------------------------------------------------------------------
-# Lebesgue constant
-# --------------------------------------------------------------------------
-
-
-def _lebesgue_function(
-    x: NDArray[np.float64], w: NDArray[np.float64], t: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """``sum_j |l_j(t)| = sum_j |q_j| / |sum_j q_j|`` at the points ``t``."""
-    out = np.empty(t.size)
-    for piece in _chunks(t.size, x.size):
-        tc = t[piece]
-        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-            q = w / (tc[:, None] - x[None, :])
-            lam = np.abs(q).sum(axis=1) / np.abs(q.sum(axis=1))
-        bad = np.flatnonzero(~np.isfinite(lam))
-        if bad.size:
-            terms, _ = _rescaled_terms(x, w, tc[bad])
-            lam[bad] = np.abs(terms).sum(axis=1) / np.abs(terms.sum(axis=1))
-        out[piece] = lam
-    return out
-
-
-def _golden_maximise(
-    f: Any, lo: NDArray[np.float64], hi: NDArray[np.float64], steps: int
-) -> NDArray[np.float64]:
-    """Golden-section search for a maximum on each bracket ``[lo_i, hi_i]`` at once."""
-    ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    a, b = lo.copy(), hi.copy()
-    c, d = b - ratio * (b - a), a + ratio * (b - a)
-    fc, fd = f(c), f(d)
-    best = np.maximum(fc, fd)
-    for _ in range(steps):
-        left = fc >= fd  # the maximum lies in [a, d]
-        b = np.where(left, d, b)
-        a = np.where(left, a, c)
-        c_new = np.where(left, b - ratio * (b - a), d)
-        d_new = np.where(left, c, a + ratio * (b - a))
-        probe = np.where(left, c_new, d_new)
-        fp = f(probe)
-        fc_new = np.where(left, fp, fd)
-        fd_new = np.where(left, fc, fp)
-        c, d, fc, fd = c_new, d_new, fc_new, fd_new
-        best = np.maximum(best, fp)
-    return best
-
-
-def lebesgue_constant(nodes: ArrayLike, weights: ArrayLike | None = None) -> float:
-    """Return the Lebesgue constant of interpolation in ``nodes``.
-
-    Parameters
-    ----------
-    nodes : array_like of shape (n + 1,)
-        Pairwise distinct, finite nodes, in any order.
-    weights : array_like of shape (n + 1,), optional
-        Barycentric weights (any common scale, non-zero). Default:
-        ``barycentric_weights(nodes)``, the polynomial interpolant. Other
-        weights give the Lebesgue constant of that barycentric rational
-        interpolant.
-
-    Returns
-    -------
-    Lambda : float
-        ``max_{x in [a, b]} sum_j |l_j(x)|`` with ``[a, b] = [min(nodes),
-        max(nodes)]``; ``1.0`` for a single node.
-
-    Raises
-    ------
-    ValueError
-        For invalid ``nodes`` or ``weights`` (as in
-        :func:`barycentric_interpolate`).
-
-    Notes
-    -----
-    ``Lambda`` bounds the amplification of data errors,
-    ``||p - p*|| <= (1 + Lambda) ||f - p*||`` for the best approximation
-    ``p*``. The Lebesgue function is evaluated in barycentric form,
-
-    .. math::
-
-        \\lambda(x) = \\sum_j |\\ell_j(x)|
-        = \\frac{\\sum_j |w_j / (x - x_j)|}{|\\sum_j w_j / (x - x_j)|},
-
-    first on a grid of at least ``4096`` interior points in total and at
-    least ``16`` per gap between consecutive nodes (``lambda = 1`` at the
-    nodes themselves); then, in every gap, the best grid point is refined by
-    48 golden-section steps on its two neighbouring grid cells.
-
-    Accuracy. Discretisation: the refinement converges to the local maximum
-    of the gap whenever ``lambda`` is unimodal on the bracket, which the
-    grid resolution makes so in practice; the result is then limited by
-    rounding only, and it is never above the true value by more than
-    rounding. Rounding: the denominator is a sum whose condition number is
-    ``lambda(x)`` itself, so the relative error is bounded by about
-    ``(n + 1) eps Lambda``: full accuracy for Chebyshev points, while for
-    equispaced nodes the error measured against 40-digit arithmetic is
-    ``2e-12`` at ``n = 20``, ``7e-8`` at ``n = 40`` and ``1e-6`` at
-    ``n = 50``; the result is meaningless once ``Lambda`` nears ``1 / eps``
-    (equispaced ``n`` above about 55).
-
-    Known values: for Chebyshev points
-    ``Lambda_n <= (2 / pi) log(n + 1) + 1``, for any nodes
-    ``Lambda_n >= (2 / pi) log(n + 1) + 0.52``, and for equispaced nodes
-    ``Lambda_n ~ 2**(n + 1) / (e n log n)`` (Runge's phenomenon) [2]_.
-
-    References
-    ----------
-    .. [1] J.-P. Berrut and L. N. Trefethen, "Barycentric Lagrange
-       interpolation", SIAM Review 46(3), 501-517, 2004.
-       :doi:`10.1137/S0036144502417715`
-    .. [2] L. N. Trefethen, "Approximation Theory and Approximation
-       Practice", SIAM, 2013, Chapter 15.
-
-    Examples
-    --------
-    >>> from reference import (lebesgue_constant,
-    ...     chebyshev_nodes, equispaced_nodes)
-    >>> round(lebesgue_constant(equispaced_nodes(2)), 6)  # exactly 5/4
-    1.25
-    >>> round(lebesgue_constant(equispaced_nodes(20)))
-    10987
-    >>> bool(lebesgue_constant(chebyshev_nodes(20)) < 3)
-    True
-    """
-    x, _ = _as_nodes(nodes)
-    w = _as_weights(weights, x)
-    if x.size == 1:
-        return 1.0
-    s = np.sort(x)
-    per_gap = max(_LEBESGUE_PER_GAP, -(-_LEBESGUE_SAMPLES // (s.size - 1)))
-    u = np.arange(per_gap + 2) / (per_gap + 1)  # 0, ..., 1 with the end nodes
-    grid = s[:-1, None] + (s[1:] - s[:-1])[:, None] * u[None, :]
-    grid[:, -1] = s[1:]
-    values = np.ones_like(grid)
-    values[:, 1:-1] = _lebesgue_function(x, w, grid[:, 1:-1].ravel()).reshape(
-        s.size - 1, per_gap
-    )
-    k = np.clip(np.argmax(values, axis=1), 1, per_gap)
-    rows = np.arange(s.size - 1)
-    refined = _golden_maximise(
-        lambda p: _lebesgue_function(x, w, p),
-        grid[rows, k - 1],
-        grid[rows, k + 1],
-        _GOLDEN_STEPS,
-    )
-    return float(max(values.max(), refined.max()))

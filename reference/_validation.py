@@ -42,6 +42,9 @@ __all__ = [
     "check_choice",
     "as_abscissae",
     "shift_parameter",
+    "as_chebyshev_kind",
+    "as_nodes",
+    "as_weights",
 ]
 
 #: Integers of at most this magnitude are exactly representable as doubles.
@@ -360,3 +363,65 @@ def shift_parameter(value: ArrayLike, name: str, origin: int) -> NDArray[np.floa
     bb = s - exact
     err = (exact - (s - bb)) + (-hi - bb)
     return s + (err - lo)
+
+
+def as_chebyshev_kind(kind: Any) -> int:
+    """Return ``kind`` when it is 1 or 2, the two kinds of Chebyshev points."""
+    if isinstance(kind, bool) or not isinstance(kind, numbers.Integral) or kind not in (1, 2):
+        raise ValueError(
+            f"`kind` must be 1 (Chebyshev points of the first kind, the roots) or "
+            f"2 (of the second kind, the extrema); got {kind!r}."
+        )
+    return int(kind)
+
+
+def as_nodes(nodes: ArrayLike) -> tuple[NDArray[np.float64], int]:
+    """Finite, non-empty, 1-D, pairwise distinct nodes (any order), and their origin.
+
+    Integers beyond ``2**53`` are shifted by an integer origin first (see
+    :func:`as_abscissae`), so distinct integers stay distinct; the interpolant
+    is translation invariant.
+    """
+    x, origin = as_abscissae(nodes, "nodes", ndim=1)
+    if x.size == 0:
+        raise ValueError("`nodes` must hold at least one node; got an empty array.")
+    order = np.argsort(x, kind="stable")
+    same = np.flatnonzero(x[order[1:]] == x[order[:-1]])
+    if same.size:
+        i, j = sorted((int(order[same[0]]), int(order[same[0] + 1])))
+        if origin:
+            raise ValueError(
+                f"`nodes` must be distinct in double precision; nodes[{i}] and "
+                f"nodes[{j}] are distinct integers, but the nodes span too wide a range "
+                "for their differences to be told apart as doubles. Rescale the nodes."
+            )
+        raise ValueError(
+            f"`nodes` must be pairwise distinct; "
+            f"nodes[{i}] == nodes[{j}] == {float(x[i])!r}."
+        )
+    return x, origin
+
+
+def as_weights(weights: ArrayLike, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Validated weights, rescaled by a power of two so that max |w| is in [0.5, 1).
+
+    The rescaling is exact (barring weights spanning more than the whole
+    exponent range) and harmless, since the formula ignores a common factor;
+    it keeps ``w / (t - x_j)`` away from overflow for user weights such as
+    the lecture's raw binomial coefficients. The nodes ``x`` are those
+    :func:`as_nodes` returned; without weights, callers compute the
+    polynomial's (``reference._weights.barycentric_weights``) instead.
+    """
+    w = as_finite_array(weights, "weights", ndim=1)
+    if w.shape != x.shape:
+        raise ValueError(
+            f"`weights` must have one entry per node, shape {x.shape}; got {w.shape}."
+        )
+    zero = np.flatnonzero(w == 0)
+    if zero.size:
+        raise ValueError(
+            f"`weights` must be non-zero (a zero weight drops its node); "
+            f"weights[{int(zero[0])}] == 0."
+        )
+    _, top = np.frexp(np.max(np.abs(w)))
+    return np.ldexp(w, -int(top))
