@@ -45,8 +45,9 @@ from autograder.errors import (
     WorkerCrashed,
 )
 from autograder.sandbox import affinity, cgroups
-from autograder.sandbox.confine import IsolationPolicy, probe_support
 from autograder.sandbox.cputime import CpuClock
+from autograder.sandbox.policy import IsolationPolicy
+from autograder.sandbox.support import probe_support
 from autograder.sandbox.tempdirs import OwnedFolder
 
 #: how long the warm parent may take to import numpy, scipy and matplotlib (our own

@@ -31,7 +31,9 @@ from autograder.engine.slot import (
     slot_lock_dir,
 )
 from autograder.sandbox import cgroups
-from autograder.sandbox.confine import IsolationPolicy, enter_sandbox, probe_support
+from autograder.sandbox.confine import enter_sandbox
+from autograder.sandbox.policy import IsolationPolicy
+from autograder.sandbox.support import probe_support
 
 # Slots claimed like a grader's, held while the tests run: a grader running at the
 # same time never uses (or sweeps) their user ids and cgroups.
