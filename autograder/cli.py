@@ -365,9 +365,9 @@ def _submit(args: argparse.Namespace) -> int:
 
 def _say_missing_protections() -> None:
     """Say once, before grading, which protections this machine cannot give."""
-    from autograder.sandbox import confine
+    from autograder.sandbox import support
 
-    for note in confine.probe_support().notes:
+    for note in support.probe_support().notes:
         print(f"autograder: note: {note}", file=sys.stderr)
 
 

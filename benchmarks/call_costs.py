@@ -43,7 +43,7 @@ from autograder.sandbox import affinity  # noqa: E402
 from autograder.boundary import protocol  # noqa: E402
 from autograder.sandbox.cputime import process_cpu_seconds  # noqa: E402
 from autograder.engine.proxy import CallLog, Student  # noqa: E402
-from autograder.sandbox.confine import IsolationPolicy  # noqa: E402
+from autograder.sandbox.policy import IsolationPolicy  # noqa: E402
 from autograder.engine.slot import StudentProcess, GradingSlot  # noqa: E402
 
 NOTEBOOK = '''

@@ -27,7 +27,7 @@ import numpy as np
 from autograder.engine.callbacks import traced
 from autograder.engine.proxy import CallLog, Student
 from autograder.engine.slot import GradingSlot, StudentProcess
-from autograder.sandbox.confine import IsolationPolicy
+from autograder.sandbox.policy import IsolationPolicy
 
 NOTEBOOK = '''
 def plain(x):

@@ -48,7 +48,8 @@ import numpy  # noqa: E402,F401
 import scipy.interpolate  # noqa: E402,F401
 import scipy.spatial  # noqa: E402,F401
 
-from autograder.sandbox import confine  # noqa: E402
+from autograder.sandbox import confine, landlock, readable  # noqa: E402
+from autograder.sandbox.policy import IsolationPolicy  # noqa: E402
 
 from autograder.sandbox import seccomp  # noqa: E402
 from autograder.worker import execute  # noqa: E402
@@ -104,9 +105,9 @@ def measure(count: int, root: Path) -> int:
     exclude = [ROOT]
     shell = execute.make_shell()
     execute.warm_up(shell)
-    confine.prime_caches()
+    readable.prime_caches()
     seccomp.prepare_filters()
-    whole = confine.IsolationPolicy()
+    whole = IsolationPolicy()
     print(f"load average {os.getloadavg()[0]:.2f}; uid {os.geteuid()}; {count} children "
           "per line; ms per child (busy: the whole machine's, counted until 0.5 s after the last)")
     print(f"  {'child':<36} {'CPU':>7} {'busy':>7} {'CPU ratio':>10}")
@@ -114,11 +115,11 @@ def measure(count: int, root: Path) -> int:
     bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
 
-    def line(label: str, policy: confine.IsolationPolicy, *, with_cell: bool = False) -> None:
+    def line(label: str, policy: IsolationPolicy, *, with_cell: bool = False) -> None:
         probe = Path(tempfile.mkdtemp(dir=work))
-        confine.coverable_folders(exclude, probe, policy)
+        readable.coverable_folders(exclude, probe, policy)
         confine.prepare_cgroup(policy, 0)
-        shared = confine.shared_landlock(policy, work, exclude)
+        shared = landlock.shared_landlock(policy, work, exclude)
         os.rmdir(probe)
 
         def enter(workdir: Path) -> None:

@@ -25,7 +25,7 @@ notebook, at least one check and every data glob must exist::
     [limits]
     notebook_timeout = 60         # seconds for the whole notebook
     call_timeout = 10             # seconds per call from a check
-    memory_bytes = 2_000_000_000  # and the other fields of autograder.sandbox.confine.Limits
+    memory_bytes = 2_000_000_000  # and the other fields of autograder.sandbox.policy.Limits
 
 Every mistake raises :class:`~autograder.errors.AssignmentError` naming the
 file, the key and what to do.
@@ -54,7 +54,7 @@ __all__ = [
     "SANDBOX_LIMITS",
 ]
 
-#: Keys of ``[limits]`` passed on to ``autograder.sandbox.confine.Limits``.
+#: Keys of ``[limits]`` passed on to ``autograder.sandbox.policy.Limits``.
 SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
                   "file_size_bytes", "output_bytes")
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
@@ -115,7 +115,7 @@ class Assignment:
     notebook_timeout, call_timeout : float
         Seconds for running the whole notebook, and for one call from a check.
     limits : tuple of (str, int or float)
-        Overrides for ``autograder.sandbox.confine.Limits``, sorted by name; build the
+        Overrides for ``autograder.sandbox.policy.Limits``, sorted by name; build the
         limits with ``Limits(**dict(assignment.limits))``.
     checks_digest : str
         SHA-256 over ``assignment.toml`` and every file under ``checks/``

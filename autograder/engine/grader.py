@@ -29,7 +29,7 @@ from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
 from autograder.results.store import write_submission
 from autograder.sandbox import affinity
-from autograder.sandbox.confine import IsolationPolicy
+from autograder.sandbox.policy import IsolationPolicy
 
 #: bump when a change to the engine can change a score (part of every result's key)
 ENGINE_VERSION = f"autograder-{autograder.__version__}"

@@ -45,8 +45,10 @@ from autograder.errors import (
     WorkerCrashed,
 )
 from autograder.sandbox import affinity, cgroups
-from autograder.sandbox.confine import IsolationPolicy, probe_support
 from autograder.sandbox.cputime import CpuClock
+from autograder.sandbox.pidfd import pidfd_kill, pidfd_open, pidfd_unreaped, pidfds_supported
+from autograder.sandbox.policy import IsolationPolicy
+from autograder.sandbox.support import probe_support
 from autograder.sandbox.tempdirs import OwnedFolder
 
 #: how long the warm parent may take to import numpy, scipy and matplotlib (our own
@@ -364,16 +366,16 @@ def child_pidfd(pid: int, parent: int | None) -> int | None:
     reading, so the reading was about that very process. None when the child is
     gone already (the sweep ends whatever it started) or the kernel has no pidfds.
     """
-    if parent is None or not cgroups.pidfds_supported():
+    if parent is None or not pidfds_supported():
         return None
     try:
-        fd = cgroups.pidfd_open(pid)
+        fd = pidfd_open(pid)
     except OSError:
         return None
     if fd is None:
         return None
     info = _proc_stat(pid)
-    if info is not None and info.ppid == parent and cgroups.pidfd_unreaped(fd):
+    if info is not None and info.ppid == parent and pidfd_unreaped(fd):
         return fd
     os.close(fd)
     return None
@@ -394,19 +396,19 @@ def kill_child(pid: int, pidfd: int | None) -> None:
     number only on a kernel without pidfds at all (before Linux 5.3).
     """
     if pidfd is None:
-        if not cgroups.pidfds_supported():
+        if not pidfds_supported():
             for kill in (os.killpg, os.kill):
                 _quietly(kill, pid)
         return
     try:
-        cgroups.pidfd_kill(pidfd, group=True)
+        pidfd_kill(pidfd, group=True)
     except PermissionError:
         pass
     except OSError as exc:  # EINVAL: no PIDFD_SIGNAL_PROCESS_GROUP before Linux 6.9
-        if exc.errno == errno.EINVAL and cgroups.pidfd_unreaped(pidfd):
+        if exc.errno == errno.EINVAL and pidfd_unreaped(pidfd):
             _quietly(os.killpg, pid)
     try:  # the child itself: before its setsid it leads no group
-        cgroups.pidfd_kill(pidfd)
+        pidfd_kill(pidfd)
     except PermissionError:
         pass
 
@@ -636,11 +638,11 @@ def kill_descendants(root: int) -> bool:
 
 def _kill_listed(pid: int, started: int) -> None:
     """SIGKILL ``pid`` if it is still the process that started at ``started``."""
-    if not cgroups.pidfds_supported():
+    if not pidfds_supported():
         _quietly(os.kill, pid)
         return
     try:
-        fd = cgroups.pidfd_open(pid)
+        fd = pidfd_open(pid)
     except OSError:  # out of descriptors: the next round tries again
         return
     if fd is None:
@@ -648,7 +650,7 @@ def _kill_listed(pid: int, started: int) -> None:
     try:
         info = _proc_stat(pid)  # read after the pidfd was opened: see child_pidfd
         if info is not None and info.started == started:
-            cgroups.pidfd_kill(fd)
+            pidfd_kill(fd)
     except PermissionError:
         pass
     finally:
@@ -724,7 +726,7 @@ def _in_cgroup(group: cgroups.SlotCgroup, pid: int, pidfd: int) -> bool:
     The listing is read first: if the pidfd's process is still unreaped afterwards,
     the number in the listing was that process's.
     """
-    return pid in group.pids() and cgroups.pidfd_unreaped(pidfd)
+    return pid in group.pids() and pidfd_unreaped(pidfd)
 
 
 @dataclass

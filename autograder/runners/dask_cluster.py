@@ -97,10 +97,10 @@ QUIET_CLUSTER: dict[str, Any] = {
 def sandbox_notes() -> tuple[str, ...]:
     """This machine's missing protections, probed in a fresh Python process.
 
-    :func:`autograder.sandbox.confine.probe_support` forks to try a namespace; a Dask
+    :func:`autograder.sandbox.support.probe_support` forks to try a namespace; a Dask
     worker has threads, so the probe runs in a new interpreter instead.
     """
-    code = ("import json; from autograder.sandbox.confine import probe_support; "
+    code = ("import json; from autograder.sandbox.support import probe_support; "
             "print(json.dumps(list(probe_support().notes)))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120, stdin=subprocess.DEVNULL)
@@ -308,7 +308,7 @@ class DaskBackend:
 
     def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
             out_dir: Path, finished: Finished) -> None:
-        from autograder.sandbox.confine import probe_support
+        from autograder.sandbox.support import probe_support
 
         cluster, client = self._connect()
         plugin = GradingSlots(make_bundle(assignment), options, engine_fingerprint(),

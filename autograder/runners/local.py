@@ -30,7 +30,7 @@ from autograder.engine.slot import GradingSlot
 from autograder.results.model import SubmissionResult
 from autograder.results.store import write_submission
 from autograder.runners.jobs import Finished, Job
-from autograder.sandbox.confine import probe_support
+from autograder.sandbox.support import probe_support
 
 # One Grader per pool process: the warm worker is the point of the pool. This is the
 # package's only module-level state, and it lives only in pool processes.

@@ -24,7 +24,8 @@ libseccomp's own Python bindings (those are not on PyPI); writing BPF by hand wo
 mean re-doing libseccomp's architecture checks (x32 and i386 system calls on x86-64
 are refused by its bad-architecture action, so ``socketcall(2)`` through
 ``int 0x80`` cannot dodge the rules). Python 3.11 has no ``os.unshare`` and no
-``mount``, so those two are called through :mod:`ctypes`.
+``mount``, so those two are called through :mod:`ctypes` (``unshare`` and the C
+library in :mod:`autograder.sandbox.kernel`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from autograder.sandbox import kernel
+from autograder.sandbox.kernel import (
+    CLONE_NEWIPC,
+    CLONE_NEWNET,
+    CLONE_NEWNS,
+    CLONE_NEWUSER,
+    CLONE_NEWUTS,
+)
+
 try:  # pyseccomp needs libseccomp.so.2 (Linux only)
     import pyseccomp
 except (ImportError, OSError):  # pragma: no cover - a Linux dependency
@@ -47,12 +57,6 @@ except (ImportError, OSError):  # pragma: no cover - a Linux dependency
 __all__ = ["NamespaceResult", "install_filter", "prepare_filters", "private_namespaces",
            "user_namespaces_allowed"]
 
-# <sched.h>
-CLONE_NEWNS = 0x00020000
-CLONE_NEWUTS = 0x04000000
-CLONE_NEWIPC = 0x08000000
-CLONE_NEWUSER = 0x10000000
-CLONE_NEWNET = 0x40000000
 # <sys/mount.h>
 MS_RDONLY = 0x1
 MS_NOSUID = 0x2
@@ -142,7 +146,7 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
     is_root = os.geteuid() == 0
     try:
         if is_root:
-            _unshare(flags)
+            kernel.unshare(flags)
         else:
             _enter_user_namespace(flags)
     except OSError as exc:
@@ -177,14 +181,14 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
 def _enter_user_namespace(flags: int) -> None:
     """New user namespace (uid and gid mapped to themselves) plus ``flags``."""
     uid, gid = os.getuid(), os.getgid()
-    _unshare(CLONE_NEWUSER | flags)
+    kernel.unshare(CLONE_NEWUSER | flags)
     # A process that changed its ids (a grader started through su or setuid) is not
     # dumpable, which makes its /proc/self files root's: writable again only while
     # dumpable, then put back as it was.
-    libc = _libc()
+    libc = kernel.libc()
     dumpable = libc.prctl(PR_GET_DUMPABLE, 0, 0, 0, 0)
     if dumpable == 0:
-        _check("prctl", libc.prctl(PR_SET_DUMPABLE, 1, 0, 0, 0))
+        kernel.check("prctl", libc.prctl(PR_SET_DUMPABLE, 1, 0, 0, 0))
     try:
         Path("/proc/self/setgroups").write_text("deny")  # required before gid_map
         Path("/proc/self/uid_map").write_text(f"{uid} {uid} 1")
@@ -211,7 +215,7 @@ def _mount_quota(workdir: Path, quota_bytes: int) -> None:
             os.chown(workdir, os.getuid(), os.getgid())
             shutil.copytree(f"/proc/self/fd/{old}", workdir, symlinks=True, dirs_exist_ok=True)
         except (OSError, shutil.Error) as exc:  # e.g. the public data exceed the quota
-            _check("umount2", _libc().umount2(os.fsencode(workdir), MNT_DETACH))
+            kernel.check("umount2", kernel.libc().umount2(os.fsencode(workdir), MNT_DETACH))
             raise OSError(errno.ENOSPC, f"the working directory does not fit: {exc}") from exc
     finally:
         os.close(old)
@@ -219,10 +223,7 @@ def _mount_quota(workdir: Path, quota_bytes: int) -> None:
 
 def _drop_namespace_capabilities() -> None:
     """An ordinary user holds every capability in its new user namespace; drop them."""
-    libc = _libc()
-    header = (ctypes.c_uint32 * 2)(0x20080522, 0)  # _LINUX_CAPABILITY_VERSION_3, this thread
-    data = (ctypes.c_uint32 * 6)()  # effective, permitted, inheritable x 2 words, all zero
-    _check("capset", libc.capset(header, data))
+    kernel.capset(0)
 
 
 def install_filter(*, block_sysv_ipc: bool) -> str:
@@ -293,27 +294,13 @@ def user_namespaces_allowed() -> bool:
     return os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
 
 
-def _unshare(flags: int) -> None:
-    _check("unshare", _libc().unshare(flags))
-
-
 def _mount(source: str | None, target: str, fstype: str | None, flags: int,
            data: str | None) -> None:
     def c_str(text: str | None) -> bytes | None:
         return None if text is None else os.fsencode(text)
 
-    libc = _libc()
+    libc = kernel.libc()
     libc.mount.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
                            ctypes.c_ulong, ctypes.c_char_p]
-    _check("mount", libc.mount(c_str(source), c_str(target), c_str(fstype), flags, c_str(data)))
-
-
-@functools.cache
-def _libc() -> ctypes.CDLL:
-    return ctypes.CDLL(None, use_errno=True)
-
-
-def _check(name: str, result: int) -> None:
-    if result == -1:
-        code = ctypes.get_errno()
-        raise OSError(code, f"{name}: {os.strerror(code)}")
+    kernel.check("mount",
+                 libc.mount(c_str(source), c_str(target), c_str(fstype), flags, c_str(data)))

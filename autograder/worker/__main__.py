@@ -63,7 +63,8 @@ import matplotlib.tri  # noqa: E402,F401
 
 from autograder.boundary import protocol  # noqa: E402
 
-from autograder.sandbox import confine  # noqa: E402
+from autograder.sandbox import confine, landlock, readable  # noqa: E402
+from autograder.sandbox.policy import IsolationPolicy, Limits  # noqa: E402
 
 from autograder.sandbox import seccomp  # noqa: E402
 from autograder.worker import execute  # noqa: E402
@@ -96,15 +97,15 @@ def _reap(signum: int, frame: Any) -> None:
             return
 
 
-def _policy(spec: dict[str, Any]) -> confine.IsolationPolicy:
-    limits = confine.Limits(**spec.get("limits", {}))
+def _policy(spec: dict[str, Any]) -> IsolationPolicy:
+    limits = Limits(**spec.get("limits", {}))
     rest: dict[str, Any] = {k: (tuple(v) if isinstance(v, list) else v)
                             for k, v in spec.items() if k != "limits"}
-    return confine.IsolationPolicy(limits=limits, **rest)
+    return IsolationPolicy(limits=limits, **rest)
 
 
 def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingShell,
-           shared: confine.SharedLandlock | None) -> None:
+           shared: landlock.SharedLandlock | None) -> None:
     """Enter the sandbox, run the cells, then serve calls. Never returns."""
     code = 0
     try:
@@ -145,13 +146,13 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
 #: the forbid list the warm parent applied to itself (inherited by every child)
 _APPLIED: list[str | None] = [None]
 #: the Landlock ruleset built once for every child (rebuilt if the settings change)
-_SHARED: list[confine.SharedLandlock | None] = [None]
+_SHARED: list[landlock.SharedLandlock | None] = [None]
 #: children forked so far
 _FORKED: list[int] = [0]
 
 
-def _shared_landlock(request: dict[str, Any], policy: confine.IsolationPolicy, workdir: Path,
-                     exclude: list[Path]) -> confine.SharedLandlock | None:
+def _shared_landlock(request: dict[str, Any], policy: IsolationPolicy, workdir: Path,
+                     exclude: list[Path]) -> landlock.SharedLandlock | None:
     """The ruleset for this request's child, built here once for the slot's work root.
 
     None when the grader named no work root, or one ``workdir`` is not directly in
@@ -164,7 +165,7 @@ def _shared_landlock(request: dict[str, Any], policy: confine.IsolationPolicy, w
     if current is None or not current.serves(policy, workdir, exclude):
         if current is not None:
             current.close()
-        current = _SHARED[0] = confine.shared_landlock(policy, Path(root), exclude)
+        current = _SHARED[0] = landlock.shared_landlock(policy, Path(root), exclude)
     return current
 
 
@@ -248,7 +249,7 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     # are found from the readable paths, which this fills the cache with too.
     policy, workdir = _policy(request["policy"]), Path(request["workdir"])
     exclude = [Path(p) for p in request.get("exclude", [])]
-    confine.coverable_folders(exclude, workdir, policy)
+    readable.coverable_folders(exclude, workdir, policy)
     confine.prepare_cgroup(policy, int(request["slot"]))
     confine.prepare_network(policy)
     _probes()
@@ -278,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     shell = execute.make_shell()
     execute.warm_up(shell)
     figures.close_all()
-    confine.prime_caches()
+    readable.prime_caches()
     seccomp.prepare_filters()
     signal.signal(signal.SIGCHLD, _reap)
     protocol.send_message(control, {"op": "hello", "pid": os.getpid(),

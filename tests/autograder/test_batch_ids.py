@@ -123,10 +123,10 @@ def test_results_round_trip_in_gradescope_format(tmp_path: Path) -> None:
 def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.MonkeyPatch,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     from autograder import cli
-    from autograder.sandbox.confine import IsolationSupport
+    from autograder.sandbox.support import IsolationSupport
 
     note = "Landlock is not available (kernel ABI 0): file and network restrictions are off."
-    monkeypatch.setattr("autograder.sandbox.confine.probe_support",
+    monkeypatch.setattr("autograder.sandbox.support.probe_support",
                         lambda: IsolationSupport(landlock_abi=0, is_root=True,
                                                  can_unshare_net=True, notes=(note,)))
     monkeypatch.setattr(cli, "_check", lambda args: 0)

@@ -17,7 +17,7 @@ from autograder.engine.callbacks import traced
 from autograder.engine.proxy import CallLog, Student, StudentFunction
 from autograder.engine.slot import GradingSlot, StudentProcess
 from autograder.errors import CallTimeout, StudentException, UsageError
-from autograder.sandbox.confine import IsolationPolicy
+from autograder.sandbox.policy import IsolationPolicy
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="the worker needs Linux (fork)")
 

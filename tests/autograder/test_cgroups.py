@@ -1,4 +1,5 @@
-"""Tests of :mod:`autograder.sandbox.cgroups` and of the sweeps that end a slot's processes.
+"""Tests of :mod:`autograder.sandbox.cgroups`, :mod:`autograder.sandbox.pidfd` and of the
+sweeps that end a slot's processes.
 
 The "hydra" below re-forks itself in a new session as fast as it can, so its pid
 changes all the time: a sweep that lists ``/proc`` and then kills what it listed
@@ -30,8 +31,10 @@ from autograder.engine.slot import (
     kill_user,
     slot_lock_dir,
 )
-from autograder.sandbox import cgroups
-from autograder.sandbox.confine import IsolationPolicy, enter_sandbox, probe_support
+from autograder.sandbox import cgroups, pidfd
+from autograder.sandbox.confine import enter_sandbox
+from autograder.sandbox.policy import IsolationPolicy
+from autograder.sandbox.support import probe_support
 
 # Slots claimed like a grader's, held while the tests run: a grader running at the
 # same time never uses (or sweeps) their user ids and cgroups.
@@ -460,7 +463,7 @@ def dead_child_pidfd(reaped: list[int]) -> tuple[int, int]:
 def test_killing_a_reaped_child_spares_the_process_that_got_its_number(reaped: list[int]) -> None:
     """The warm parent reaps a child at once; its number, and group, may then be another's."""
     require_root("choosing the next pid (ns_last_pid)")
-    if not cgroups.pidfds_supported():
+    if not pidfd.pidfds_supported():
         pytest.skip("no pidfds on this kernel (Linux 5.3+)")
     pid, fd = dead_child_pidfd(reaped)
     try:
@@ -490,7 +493,7 @@ def test_the_group_is_killed_after_its_leader_was_reaped(reaped: list[int]) -> N
     try:
         os.waitpid(pid, 0)  # reaped, as the warm parent does
         try:
-            signal.pidfd_send_signal(fd, 0, None, cgroups.PIDFD_SIGNAL_PROCESS_GROUP)
+            signal.pidfd_send_signal(fd, 0, None, pidfd.PIDFD_SIGNAL_PROCESS_GROUP)
         except OSError:
             pytest.skip("no PIDFD_SIGNAL_PROCESS_GROUP on this kernel (Linux 6.9+)")
         kill_child(pid, fd)
@@ -501,7 +504,7 @@ def test_the_group_is_killed_after_its_leader_was_reaped(reaped: list[int]) -> N
 
 
 def test_child_pidfd_needs_the_warm_parent_as_parent(reaped: list[int]) -> None:
-    if not cgroups.pidfds_supported():
+    if not pidfd.pidfds_supported():
         pytest.skip("no pidfds on this kernel (Linux 5.3+)")
     pid = sleeper()
     reaped.append(pid)
@@ -526,16 +529,16 @@ def test_a_listed_process_is_killed_only_if_it_is_still_the_one_listed(reaped: l
 
 
 def test_signal_listed_kills_only_numbers_listed_again(reaped: list[int]) -> None:
-    if not cgroups.pidfds_supported():
+    if not pidfd.pidfds_supported():
         pytest.skip("no pidfds on this kernel (Linux 5.3+)")
     pid = sleeper()
     reaped.append(pid)
     killed: dict[int, int] = {}
     listings = iter([{pid}, set()])  # gone from the list by the second reading
-    cgroups.signal_listed(lambda: next(listings), killed)
+    pidfd.signal_listed(lambda: next(listings), killed)
     time.sleep(0.05)
     assert alive(pid) and killed == {}
-    cgroups.signal_listed(lambda: {pid}, killed)
+    pidfd.signal_listed(lambda: {pid}, killed)
     os.waitpid(pid, 0)
     assert list(killed) == [pid]
     for fd in killed.values():

@@ -1,4 +1,9 @@
-"""Tests of :mod:`autograder.sandbox.confine`.
+"""Tests of :mod:`autograder.sandbox.confine` and of the modules whose steps it orders.
+
+The policy (:mod:`autograder.sandbox.policy`), the probe of what the machine offers
+(:mod:`autograder.sandbox.support`), the readable paths (:mod:`autograder.sandbox.readable`),
+the Landlock ruleset (:mod:`autograder.sandbox.landlock`) and the child's environment
+(:mod:`autograder.sandbox.environment`).
 
 Each sandbox case forks a child that enters the sandbox in a temporary working
 directory, tries one thing and reports over a pipe as JSON; the parent asserts.
@@ -28,18 +33,13 @@ import pytest
 
 from autograder.engine.slot import claim_slot
 from autograder.errors import UsageError
-from autograder.sandbox import confine
-from autograder.sandbox.confine import (
-    IsolationPolicy,
-    Limits,
-    SharedLandlock,
-    clean_environment,
-    coverable_folders,
-    enter_sandbox,
-    probe_support,
-    readable_paths,
-    shared_landlock,
-)
+from autograder.sandbox import readable
+from autograder.sandbox.confine import enter_sandbox
+from autograder.sandbox.environment import clean_environment
+from autograder.sandbox.landlock import SharedLandlock, shared_landlock
+from autograder.sandbox.policy import IsolationPolicy, Limits
+from autograder.sandbox.readable import coverable_folders, readable_paths
+from autograder.sandbox.support import probe_support
 
 REPO = Path(__file__).resolve().parents[2]
 # Slots claimed as a grader claims them and held while the tests run: a grader running
@@ -282,16 +282,16 @@ def test_owners_of_the_hidden_packages_are_those_importlib_metadata_names() -> N
     owners = importlib.metadata.packages_distributions()
 
     def expected(packages: Sequence[str]) -> set[str]:
-        return {confine._normalise(d) for p in packages for d in owners.get(p, []) if d}
+        return {readable._normalise(d) for p in packages for d in owners.get(p, []) if d}
 
     importable = sorted(name for name in owners if name.isidentifier()
                         and importlib.util.find_spec(name) is not None)
     assert {"autograder", "numpy", "pytest"} <= set(importable)
-    for package in [*confine.HIDDEN_PACKAGES, "numpy", "scipy", "IPython", "pytest", "_pytest",
+    for package in [*readable.HIDDEN_PACKAGES, "numpy", "scipy", "IPython", "pytest", "_pytest",
                     "matplotlib", "mpl_toolkits", "nbformat", "six", "not_installed_at_all"]:
-        assert confine._distribution_names([package]) == expected([package]), package
-    assert confine._distribution_names(importable) == expected(importable)
-    assert confine._distribution_names(confine.HIDDEN_PACKAGES) >= {"numgrade"}
+        assert readable._distribution_names([package]) == expected([package]), package
+    assert readable._distribution_names(importable) == expected(importable)
+    assert readable._distribution_names(readable.HIDDEN_PACKAGES) >= {"numgrade"}
 
 
 def test_path_containment_by_components_is_pathlibs() -> None:
@@ -300,11 +300,11 @@ def test_path_containment_by_components_is_pathlibs() -> None:
                                 "/x/a/b", "/a/b/c.d")]
     for path in paths:
         for root in paths:
-            assert confine._within(path, root) == (path == root or root in path.parents), \
+            assert readable._within(path, root) == (path == root or root in path.parents), \
                 (path, root)
-    assert confine._outermost([*paths[1:], Path("/a/b"), Path("/x/a/b")]) == [
+    assert readable._outermost([*paths[1:], Path("/a/b"), Path("/x/a/b")]) == [
         Path("/a"), Path("/ab"), Path("/x/a/b")]
-    assert confine._outermost(paths) == [Path("/")]
+    assert readable._outermost(paths) == [Path("/")]
 
 
 def test_probe_support_is_cached_and_consistent() -> None:
@@ -696,7 +696,8 @@ def test_inherited_environment_block_is_wiped(workdir: Path) -> None:
     script = textwrap.dedent(f"""
         import json, sys
         from pathlib import Path
-        from autograder.sandbox.confine import IsolationPolicy, enter_sandbox
+        from autograder.sandbox.confine import enter_sandbox
+        from autograder.sandbox.policy import IsolationPolicy
         proc = Path("/proc/self/environ")
         before = "{SECRET}" in proc.read_text("latin-1")
         enter_sandbox(IsolationPolicy(), Path({str(workdir)!r}), slot={SLOTS[4]})

@@ -27,13 +27,10 @@ import pytest
 
 from autograder.engine.slot import claim_slot
 from autograder.sandbox import seccomp
-from autograder.sandbox.confine import (
-    IsolationPolicy,
-    Limits,
-    enter_sandbox,
-    probe_support,
-    readable_paths,
-)
+from autograder.sandbox.confine import enter_sandbox
+from autograder.sandbox.policy import IsolationPolicy, Limits
+from autograder.sandbox.readable import readable_paths
+from autograder.sandbox.support import probe_support
 
 pyseccomp = pytest.importorskip("pyseccomp", reason="libseccomp (Debian: libseccomp2) is missing")
 

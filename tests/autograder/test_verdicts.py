@@ -24,7 +24,7 @@ from autograder.engine.assignment import load_assignment
 from autograder.engine.grader import Grader, GradingOptions, engine_digest, submission_key
 from autograder.engine.slot import GradingSlot, StudentProcess
 from autograder.errors import EngineError
-from autograder.sandbox.confine import IsolationPolicy
+from autograder.sandbox.policy import IsolationPolicy
 
 ROOT = Path(__file__).resolve().parents[2]
 HULL = ROOT / "assignments" / "hull"
@@ -200,7 +200,7 @@ def test_an_incomplete_sandbox_is_an_engine_error(tmp_path: Path) -> None:
     try:
         if not IsolationPolicy().landlock:
             pytest.skip("Landlock is off")
-        from autograder.sandbox.confine import probe_support
+        from autograder.sandbox.support import probe_support
         if probe_support().landlock_abi == 0:
             pytest.skip("Landlock is not available on this kernel: no file rules to get wrong")
         with pytest.raises(EngineError, match="cannot read"):
@@ -270,7 +270,7 @@ def test_started_from_the_course_folder_the_worker_reads_no_other_submission(tmp
     probe = (f"try:\n    open({str(bob)!r}).read(10)\n    print('READ-CLASSMATE')\n"
              "except OSError as exc:\n    print('DENIED', type(exc).__name__)\n")
     with_cell(SOLUTION, probe, course / "submitted" / "eve" / "hull" / "hull.ipynb")
-    from autograder.sandbox.confine import probe_support
+    from autograder.sandbox.support import probe_support
     if probe_support().landlock_abi == 0:
         pytest.skip("Landlock is not available on this kernel: files are not confined")
     proc = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", "submitted",
