@@ -1,6 +1,6 @@
 """Tests of :mod:`autograder.sandbox.cgroups` and of the sweeps that end a slot's processes.
 
-The "hydra" below re-forks itself in a new session as fast as it can, so its pid
+The sweeps are in :mod:`autograder.sandbox.reaper`. The "hydra" below re-forks itself in a new session as fast as it can, so its pid
 changes all the time: a sweep that lists ``/proc`` and then kills what it listed
 misses it. Each sweep must leave nothing, and the check is repeated after a pause
 so that a survivor would have had time to show up.
@@ -20,18 +20,17 @@ from pathlib import Path
 
 import pytest
 
-from autograder.engine.slot import (
+from autograder.engine.slot import claim_slot, slot_lock_dir
+from autograder.sandbox import cgroups
+from autograder.sandbox.confine import IsolationPolicy, enter_sandbox, probe_support
+from autograder.sandbox.reaper import (
     _kill_listed,
     _proc_stat,
     child_pidfd,
-    claim_slot,
     kill_child,
     kill_descendants,
     kill_user,
-    slot_lock_dir,
 )
-from autograder.sandbox import cgroups
-from autograder.sandbox.confine import IsolationPolicy, enter_sandbox, probe_support
 
 # Slots claimed like a grader's, held while the tests run: a grader running at the
 # same time never uses (or sweeps) their user ids and cgroups.
