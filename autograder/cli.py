@@ -228,7 +228,7 @@ def _options(args: argparse.Namespace) -> GradingOptions:
 
 
 def _worker_started_early(wanted: bool) -> contextlib.AbstractContextManager[GradingSlot | None]:
-    """A warm parent started before the engine's imports (see ``session.start_early``);
+    """A warm parent started before the engine's imports (see ``slot.start_early``);
     the slot's own context shuts it down at the end of the command."""
     if not wanted:
         return contextlib.nullcontext()

@@ -44,7 +44,8 @@ from autograder.boundary import protocol  # noqa: E402
 from autograder.sandbox.cputime import process_cpu_seconds  # noqa: E402
 from autograder.engine.proxy import CallLog, Student  # noqa: E402
 from autograder.sandbox.policy import IsolationPolicy  # noqa: E402
-from autograder.engine.slot import StudentProcess, GradingSlot  # noqa: E402
+from autograder.engine.slot import GradingSlot  # noqa: E402
+from autograder.engine.student_process import StudentProcess  # noqa: E402
 
 NOTEBOOK = '''
 import numpy as np

@@ -26,7 +26,8 @@ import numpy as np
 
 from autograder.engine.callbacks import traced
 from autograder.engine.proxy import CallLog, Student
-from autograder.engine.slot import GradingSlot, StudentProcess
+from autograder.engine.slot import GradingSlot
+from autograder.engine.student_process import StudentProcess
 from autograder.sandbox.policy import IsolationPolicy
 
 NOTEBOOK = '''

@@ -20,8 +20,8 @@ warm worker and is not counted, and times each phase of every submission:
   was a whole ``pytest.main`` per submission (configuration, plugins, importing
   and collecting the checks);
 * checks: the check items, with the child's time answering their calls;
-* sweep: killing the child and sweeping the slot (:func:`autograder.engine.slot.kill_child`
-  and :func:`~autograder.engine.slot.sweep_slot`), most of whose wall time is the
+* sweep: killing the child and sweeping the slot (:func:`autograder.sandbox.reaper.kill_child`
+  and :func:`~autograder.sandbox.reaper.sweep_slot`), most of whose wall time is the
   killed child's own exit;
 * other: the rest of ``Grader.grade`` (reading the notebook, results).
 
@@ -57,7 +57,7 @@ from autograder.engine import checkrun  # noqa: E402
 
 from autograder.engine import grader  # noqa: E402
 
-from autograder.engine import slot  # noqa: E402
+from autograder.engine import student_process  # noqa: E402
 
 from autograder.engine import staticscan  # noqa: E402
 from autograder.engine.assignment import load_assignment  # noqa: E402
@@ -166,9 +166,9 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
         return report
     staticscan.scan = scan
 
-    spawn, wait = slot.StudentProcess._spawn, slot.StudentProcess._await
+    spawn, wait = student_process.StudentProcess._spawn, student_process.StudentProcess._await
 
-    def spawn_child(self: slot.StudentProcess) -> None:
+    def spawn_child(self: student_process.StudentProcess) -> None:
         warm = self.slot.warm_parent
         warm_before = process_cpu_seconds(warm) if warm else 0.0
         wall, cpu = time.perf_counter(), time.process_time()
@@ -176,7 +176,7 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
         fork = process_cpu_seconds(self.slot.warm_parent or 0) - warm_before  # its fork()
         current().spawned = (wall, cpu, max(0.0, fork))
 
-    def await_message(self: slot.StudentProcess, *args: Any) -> Any:
+    def await_message(self: student_process.StudentProcess, *args: Any) -> Any:
         message = wait(self, *args)
         op = message.get("op") if isinstance(message, dict) else None
         probe = current()
@@ -191,9 +191,10 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
             probe.add("notebook run", time.perf_counter() - probe.child.pop("mark"), 0.0,
                       probe.child["ready"] - probe.child.get("started", 0.0))
         return message
-    slot.StudentProcess._spawn, slot.StudentProcess._await = spawn_child, await_message
+    student_process.StudentProcess._spawn = spawn_child
+    student_process.StudentProcess._await = await_message
 
-    kill_child, sweep_slot = slot.kill_child, slot.sweep_slot
+    kill_child, sweep_slot = student_process.kill_child, student_process.sweep_slot
 
     def kill(pid: int, pidfd: int | None) -> None:
         if before is not None and old_sweep():
@@ -213,8 +214,8 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
             before["session"].sweep_slot(policy, slot, warm_parent)
         else:
             sweep_slot(policy, slot, warm_parent, child)
-    slot.kill_child = read_then_kill
-    slot.sweep_slot = timed(current, "sweep", sweep)
+    student_process.kill_child = read_then_kill
+    student_process.sweep_slot = timed(current, "sweep", sweep)
 
     prepare = checkrun._prepareconfig
 

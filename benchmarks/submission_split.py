@@ -35,7 +35,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from engine_vs_peers import HULL, run_floor, write_trivial  # noqa: E402
 
-from autograder.engine import slot  # noqa: E402
+from autograder.engine import student_process  # noqa: E402
 from autograder.engine.assignment import load_assignment  # noqa: E402
 from autograder.runners.batch import grade_one  # noqa: E402
 from autograder.engine.grader import Grader  # noqa: E402
@@ -60,7 +60,7 @@ def reaped_children_ms(pid: int) -> float:
 
 def record_child_marks(marks: dict[str, list[float]]) -> None:
     """Read the child's CPU at its "started" and "ready" messages and before its kill."""
-    receive, kill = slot.StudentProcess._await, slot.StudentProcess._kill
+    receive, kill = student_process.StudentProcess._await, student_process.StudentProcess._kill
 
     def on_message(self: Any, *args: Any, **kwargs: Any) -> Any:
         message = receive(self, *args, **kwargs)
@@ -76,8 +76,8 @@ def record_child_marks(marks: dict[str, list[float]]) -> None:
             marks["kill"].append(value)
         kill(self)
 
-    slot.StudentProcess._await = on_message  # type: ignore[method-assign]
-    slot.StudentProcess._kill = on_kill  # type: ignore[method-assign]
+    student_process.StudentProcess._await = on_message  # type: ignore[method-assign]
+    student_process.StudentProcess._kill = on_kill  # type: ignore[method-assign]
 
 
 def main() -> None:

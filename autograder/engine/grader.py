@@ -24,7 +24,8 @@ from autograder.engine.assignment import Assignment
 from autograder.engine.checkrun import CheckSuite, forget_check_modules
 from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
-from autograder.engine.slot import GradingSlot, NotebookRun, StudentProcess
+from autograder.engine.slot import GradingSlot
+from autograder.engine.student_process import NotebookRun, StudentProcess
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
 from autograder.results.store import write_submission

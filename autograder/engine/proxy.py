@@ -35,7 +35,7 @@ class CallTarget(Protocol):
     """What the proxy needs from a session (a real worker or an unreadable notebook).
 
     A session that can answer callbacks also has an ``on_callback`` attribute and a
-    ``request(message, *, timeout, what)`` method (see :mod:`autograder.engine.slot`).
+    ``request(message, *, timeout, what)`` method (see :mod:`autograder.engine.student_process`).
     """
 
     def call(self, name: str, args: Any, kwargs: dict[str, Any], *, timeout: float,

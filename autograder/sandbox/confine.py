@@ -241,7 +241,7 @@ def prepare_network(policy: IsolationPolicy) -> None:
     of the child's CPU and 1 ms of the kernel's teardown per submission
     (``benchmarks/sandbox_costs.py``). Sharing it leaks nothing from one student to the
     next: a slot runs one child at a time, every process of a submission is killed
-    before the next starts (:func:`autograder.engine.slot.sweep_slot`), and no child keeps
+    before the next starts (:func:`autograder.sandbox.reaper.sweep_slot`), and no child keeps
     the capabilities to configure the namespace (only ``lo``, down). A child whose
     policy wants the network returns to the namespace the parent came from. Nothing
     happens for an ordinary user, whose children make their own inside a user namespace.

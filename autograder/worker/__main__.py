@@ -78,7 +78,7 @@ def _adopt_orphans() -> None:
 
     A grader that is not root has neither a user nor a cgroup per slot; it finds a
     submission's processes as the descendants of this process
-    (:func:`autograder.engine.slot.kill_descendants`), even those whose parent died.
+    (:func:`autograder.sandbox.reaper.kill_descendants`), even those whose parent died.
     """
     try:
         libc = ctypes.CDLL(None, use_errno=True)

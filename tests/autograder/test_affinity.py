@@ -12,7 +12,7 @@ import pytest
 
 from autograder.engine.assignment import load_assignment
 from autograder.engine.grader import Grader
-from autograder.engine.slot import StudentProcess
+from autograder.engine.student_process import StudentProcess
 from autograder.errors import UsageError
 from autograder.sandbox import affinity
 from tests.support.assignments import CHECK, RIGHT, submission, write_double

@@ -15,7 +15,8 @@ import pytest
 from autograder.engine import callbacks
 from autograder.engine.callbacks import traced
 from autograder.engine.proxy import CallLog, Student, StudentFunction
-from autograder.engine.slot import GradingSlot, StudentProcess
+from autograder.engine.slot import GradingSlot
+from autograder.engine.student_process import StudentProcess
 from autograder.errors import CallTimeout, StudentException, UsageError
 from autograder.sandbox.policy import IsolationPolicy
 

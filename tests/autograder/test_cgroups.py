@@ -1,7 +1,7 @@
 """Tests of :mod:`autograder.sandbox.cgroups`, :mod:`autograder.sandbox.pidfd` and of the
 sweeps that end a slot's processes.
 
-The "hydra" below re-forks itself in a new session as fast as it can, so its pid
+The sweeps are in :mod:`autograder.sandbox.reaper`. The "hydra" below re-forks itself in a new session as fast as it can, so its pid
 changes all the time: a sweep that lists ``/proc`` and then kills what it listed
 misses it. Each sweep must leave nothing, and the check is repeated after a pause
 so that a survivor would have had time to show up.
@@ -21,15 +21,14 @@ from pathlib import Path
 
 import pytest
 
-from autograder.engine.slot import (
+from autograder.engine.slot import claim_slot, slot_lock_dir
+from autograder.sandbox.reaper import (
     _kill_listed,
     _proc_stat,
     child_pidfd,
-    claim_slot,
     kill_child,
     kill_descendants,
     kill_user,
-    slot_lock_dir,
 )
 from autograder.sandbox import cgroups, pidfd
 from autograder.sandbox.confine import enter_sandbox

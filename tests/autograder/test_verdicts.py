@@ -22,7 +22,8 @@ import pytest
 
 from autograder.engine.assignment import load_assignment
 from autograder.engine.grader import Grader, GradingOptions, engine_digest, submission_key
-from autograder.engine.slot import GradingSlot, StudentProcess
+from autograder.engine.slot import GradingSlot
+from autograder.engine.student_process import StudentProcess
 from autograder.errors import EngineError
 from autograder.sandbox.policy import IsolationPolicy
 
