@@ -157,7 +157,11 @@ def sandboxed_child_cgroups(workdir: Path, reaped: list[int]) -> str:
     reaped.append(pid)
     os.close(write_fd)
     with os.fdopen(read_fd, "rb") as pipe:
-        return pipe.read().decode()
+        text = pipe.read().decode()
+    # The pipe closes as the child exits, a moment before it leaves the cgroup: wait for
+    # it, so that a test reading the cgroup's processes next does not see it leaving.
+    os.waitpid(pid, 0)
+    return text
 
 
 def test_child_enters_its_slot_cgroup(tmp_path: Path, reaped: list[int]) -> None:
