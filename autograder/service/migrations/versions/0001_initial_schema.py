@@ -14,6 +14,15 @@ depends_on = None
 
 
 def upgrade() -> None:
+    _users()
+    _extensions()
+    _submissions()
+    _web_sessions()
+    _jobs()
+    _gradings()
+
+
+def _users() -> None:
     op.create_table('users',
     sa.Column('id', sa.String(length=128), nullable=False),
     sa.Column('name', sa.String(length=256), nullable=False),
@@ -23,6 +32,9 @@ def upgrade() -> None:
     sa.PrimaryKeyConstraint('id'),
     sa.UniqueConstraint('token_hash')
     )
+
+
+def _extensions() -> None:
     op.create_table('extensions',
     sa.Column('user_id', sa.String(length=128), nullable=False),
     sa.Column('assignment', sa.String(length=128), nullable=False),
@@ -30,6 +42,9 @@ def upgrade() -> None:
     sa.ForeignKeyConstraint(['user_id'], ['users.id'], ondelete='CASCADE'),
     sa.PrimaryKeyConstraint('user_id', 'assignment')
     )
+
+
+def _submissions() -> None:
     op.create_table('submissions',
     sa.Column('id', sa.Integer(), autoincrement=True, nullable=False),
     sa.Column('user_id', sa.String(length=128), nullable=False),
@@ -54,6 +69,8 @@ def upgrade() -> None:
         batch_op.create_index(batch_op.f('ix_submissions_submitted_at'), ['submitted_at'], unique=False)
         batch_op.create_index(batch_op.f('ix_submissions_user_id'), ['user_id'], unique=False)
 
+
+def _web_sessions() -> None:
     op.create_table('web_sessions',
     sa.Column('id_hash', sa.String(length=64), nullable=False),
     sa.Column('user_id', sa.String(length=128), nullable=False),
@@ -65,6 +82,8 @@ def upgrade() -> None:
     with op.batch_alter_table('web_sessions', schema=None) as batch_op:
         batch_op.create_index(batch_op.f('ix_web_sessions_user_id'), ['user_id'], unique=False)
 
+
+def _jobs() -> None:
     op.create_table('jobs',
     sa.Column('id', sa.Integer(), autoincrement=True, nullable=False),
     sa.Column('submission_id', sa.Integer(), nullable=False),
@@ -84,6 +103,8 @@ def upgrade() -> None:
         batch_op.create_index(batch_op.f('ix_jobs_state'), ['state'], unique=False)
         batch_op.create_index(batch_op.f('ix_jobs_submission_id'), ['submission_id'], unique=False)
 
+
+def _gradings() -> None:
     op.create_table('gradings',
     sa.Column('id', sa.Integer(), autoincrement=True, nullable=False),
     sa.Column('job_id', sa.Integer(), nullable=False),
@@ -98,7 +119,6 @@ def upgrade() -> None:
     )
     with op.batch_alter_table('gradings', schema=None) as batch_op:
         batch_op.create_index(batch_op.f('ix_gradings_submission_id'), ['submission_id'], unique=False)
-
 
 
 def downgrade() -> None:

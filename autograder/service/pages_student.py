@@ -1,0 +1,166 @@
+"""The student pages: signing in and out, assignments, uploading, an attempt and its feedback.
+
+Every attempt is looked up through the signed-in user
+(:func:`~autograder.service.web.my_submission`), so another student's id
+answers the same 404 as an id that does not exist.
+"""
+
+from __future__ import annotations
+
+import secrets
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import JSONResponse, RedirectResponse, Response
+from sqlalchemy.orm import Session, sessionmaker
+from starlette.concurrency import run_in_threadpool
+
+from autograder.errors import UploadRejected
+from autograder.service import auth
+from autograder.service.api_routes import submission_view
+from autograder.service.course import AssignmentPolicy
+from autograder.service.intake import accept
+from autograder.service.models import utcnow
+from autograder.service.standing import final_score, standing, time_left
+from autograder.service.web import (
+    LOGIN_COOKIE,
+    SESSION_COOKIE,
+    Assignment,
+    MaybeSignedIn,
+    MySubmission,
+    Service,
+    ServiceState,
+    SignedIn,
+    Who,
+    check_csrf,
+    safe_next,
+    upload_form,
+    wants_json,
+)
+
+router = APIRouter()
+
+
+# -- signing in ------------------------------------------------------------------------
+
+@router.get("/")
+def home(who: MaybeSignedIn) -> Response:
+    if who is None:
+        return RedirectResponse("/login", status_code=303)
+    return RedirectResponse("/instructor" if who.staff else "/assignments", status_code=303)
+
+
+@router.get("/login")
+def login_page(svc: ServiceState, next: str = "/") -> Response:
+    nonce = secrets.token_urlsafe(24)
+    response = svc.page("login.html.j2", None, csrf=nonce, next=safe_next(next), error="")
+    response.set_cookie(LOGIN_COOKIE, nonce, httponly=True, samesite="strict", path="/login")
+    return response
+
+
+def _open_session(factory: sessionmaker[Session], token: str) -> str | None:
+    """A new session cookie for the holder of ``token``, or ``None`` for a wrong token."""
+    with factory.begin() as session:
+        user = auth.user_for_token(session, token)
+        return None if user is None else auth.open_session(session, user)
+
+
+@router.post("/login")
+async def login(request: Request, svc: ServiceState) -> Response:
+    form = await request.form(max_fields=10)
+    nonce = request.cookies.get(LOGIN_COOKIE)
+    if not nonce or not auth.same_secret(str(form.get("csrf", "")), nonce):
+        raise HTTPException(403, "The sign-in form is out of date; reload it and try again.")
+    token = str(form.get("token", "")).strip()
+    target = safe_next(str(form.get("next", "/")))
+    cookie = await run_in_threadpool(_open_session, svc.factory, token)
+    if cookie is None:
+        return svc.page("login.html.j2", None, status=401, csrf=nonce, next=target,
+                        error="That access token is not valid. Copy it again from the "
+                              "message your instructor sent.")
+    response = RedirectResponse(target, status_code=303)
+    response.set_cookie(SESSION_COOKIE, cookie, httponly=True, samesite="lax", path="/")
+    response.delete_cookie(LOGIN_COOKIE, path="/login")
+    return response
+
+
+def _close_session(factory: sessionmaker[Session], cookie: str | None) -> None:
+    with factory.begin() as session:
+        auth.close_session(session, cookie)
+
+
+@router.post("/logout")
+async def logout(request: Request, who: SignedIn, svc: ServiceState) -> Response:
+    check_csrf(who, await request.form(max_fields=5), request)
+    await run_in_threadpool(_close_session, svc.factory, request.cookies.get(SESSION_COOKIE))
+    response = RedirectResponse("/login", status_code=303)
+    response.delete_cookie(SESSION_COOKIE, path="/")
+    return response
+
+
+# -- assignments and uploads -------------------------------------------------------------
+
+@router.get("/assignments")
+def assignments(who: SignedIn, svc: ServiceState) -> Response:
+    now = utcnow()
+    with svc.factory() as session:
+        rows = [standing(session, p, who.id) for p in svc.course.assignments]
+    return svc.page("assignments.html.j2", who, rows=rows, left=lambda t: time_left(t, now))
+
+
+def _assignment_page(svc: Service, who: Who, policy: AssignmentPolicy, *, status: int = 200,
+                     error: str = "") -> Response:
+    """One assignment's page: the student's standing, the upload form and ``error``."""
+    now = utcnow()
+    with svc.factory() as session:
+        stand = standing(session, policy, who.id)
+    return svc.page("assignment.html.j2", who, status=status, s=stand, error=error,
+                    final_score=final_score, left=time_left(stand.deadline, now),
+                    is_open=stand.is_open(now), max_bytes=svc.course.max_upload_bytes)
+
+
+@router.get("/assignments/{name}")
+def assignment_page(who: SignedIn, policy: Assignment, svc: ServiceState) -> Response:
+    return _assignment_page(svc, who, policy)
+
+
+@router.post("/assignments/{name}/submissions")
+async def submit(request: Request, name: str, who: SignedIn, policy: Assignment,
+                 svc: ServiceState) -> Response:
+    try:
+        form = await upload_form(request, svc)
+        check_csrf(who, form, request)
+        upload = form.get("notebook")
+        if upload is None or isinstance(upload, str):
+            raise UploadRejected("Choose your .ipynb notebook to upload.")
+        data = await upload.read(svc.course.max_upload_bytes + 1)
+        sub = await run_in_threadpool(accept, svc.factory, svc.storage, svc.course, user_id=who.id,
+                                      assignment=name, filename=upload.filename or "", data=data)
+    except UploadRejected as exc:
+        return await run_in_threadpool(_rejected, request, svc, who, policy, exc)
+    if wants_json(request, who):
+        return JSONResponse(submission_view(sub), status_code=201)
+    return RedirectResponse(f"/submissions/{sub.id}", status_code=303)
+
+
+def _rejected(request: Request, svc: Service, who: Who, policy: AssignmentPolicy,
+              exc: UploadRejected) -> Response:
+    headers = {"Retry-After": str(exc.retry_after)} if exc.retry_after else {}
+    if wants_json(request, who):
+        return JSONResponse({"error": str(exc)}, status_code=exc.status, headers=headers)
+    response = _assignment_page(svc, who, policy, status=exc.status, error=str(exc))
+    response.headers.update(headers)
+    return response
+
+
+# -- an attempt ---------------------------------------------------------------------------
+
+@router.get("/submissions/{sub_id}")
+def submission_page(mine: MySubmission, svc: ServiceState) -> Response:
+    policy = svc.policy(mine.sub.assignment)
+    return svc.page("submission.html.j2", mine.who, sub=mine.sub, view=submission_view(mine.sub),
+                    policy=policy)
+
+
+@router.get("/submissions/{sub_id}/feedback")
+def feedback(mine: MySubmission, svc: ServiceState) -> Response:
+    return svc.feedback_file(mine.sub)
