@@ -31,7 +31,7 @@ from typing import Any, Callable, NamedTuple, Sequence
 
 import numpy as np
 
-from autograder.boundary import protocol
+from autograder.boundary import frames, values
 from autograder.errors import (
     AutograderError,
     CallTimeout,
@@ -39,6 +39,7 @@ from autograder.errors import (
     ForbiddenUse,
     MissingFunction,
     NotRun,
+    ProtocolError,
     StudentError,
     StudentException,
     UnsupportedValue,
@@ -263,8 +264,8 @@ class GradingSlot:
     def _greet(self) -> None:
         assert self._control is not None
         try:
-            hello = protocol.recv_message(self._control, timeout=STARTUP_TIMEOUT)
-        except (EOFError, OSError, protocol.ProtocolError) as exc:
+            hello = frames.recv_message(self._control, timeout=STARTUP_TIMEOUT)
+        except (EOFError, OSError, ProtocolError) as exc:
             detail = self._stderr_tail()
             self.close()
             raise AutograderError(f"the grading worker did not start: {exc}. {detail}") from exc
@@ -289,11 +290,11 @@ class GradingSlot:
             ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
             try:
                 assert self._control is not None
-                protocol.send_message(self._control, request)
+                frames.send_message(self._control, request)
                 socket.send_fds(self._control, [b"F"], [theirs.fileno()])
-                answer = protocol.recv_message(self._control, timeout=30)
+                answer = frames.recv_message(self._control, timeout=30)
                 return int(answer["pid"]), ours
-            except (OSError, EOFError, protocol.ProtocolError, KeyError, TypeError):
+            except (OSError, EOFError, ProtocolError, KeyError, TypeError):
                 ours.close()
                 self.close()
                 if attempt == 2:
@@ -812,7 +813,7 @@ class StudentProcess:
                     spent = self._clock.used()
                     self._kill()
                     return "timeout", current, None
-                except (EOFError, OSError, protocol.ProtocolError) as exc:
+                except (EOFError, OSError, ProtocolError) as exc:
                     self._kill()
                     if not started:  # the engine's own set-up failed, not the student
                         raise EngineError(
@@ -893,7 +894,7 @@ class StudentProcess:
             if readable:
                 # A frame has started: the child may still stall inside it, so the
                 # wall-clock backstop bounds the rest of the read.
-                return protocol.recv_message(self._sock, timeout=max(wall_left, 1.0))
+                return frames.recv_message(self._sock, timeout=max(wall_left, 1.0))
             used = self._clock.used()
 
     def _kill(self) -> None:
@@ -918,7 +919,7 @@ class StudentProcess:
     def close(self) -> None:
         if self._sock is not None:
             try:
-                protocol.send_message(self._sock, {"op": "bye"})
+                frames.send_message(self._sock, {"op": "bye"})
             except OSError:
                 pass
         self._kill()
@@ -963,14 +964,14 @@ class StudentProcess:
         self._clock.start()
         wall_deadline = time.monotonic() + wall_backstop(limit)
         try:
-            protocol.send_message(self._sock, message)
+            frames.send_message(self._sock, message)
             while True:
                 answer = self._await(limit, wall_deadline)
                 if not (isinstance(answer, dict) and answer.get("op") == "callback"):
                     break
                 reply = (self.on_callback(answer) if self.on_callback is not None else
                          {"op": "callback-result", "ok": False, "error": "no callbacks"})
-                protocol.send_message(self._sock, reply)
+                frames.send_message(self._sock, reply)
         except TimeoutError:
             used = spent = self._clock.used()
             self._kill()
@@ -981,7 +982,7 @@ class StudentProcess:
             raise CallTimeout(
                 f"{what} did not return within {wall_backstop(limit):g} s although it used "
                 f"only {used:.1f} s of CPU: it was waiting (sleep, input, a lock, a pipe).") from None
-        except protocol.ProtocolError as exc:
+        except ProtocolError as exc:
             self._kill()
             raise UnsupportedValue(
                 f"{what} returned a value the grader cannot read ({exc}); return a number, "
@@ -1029,7 +1030,7 @@ class StudentProcess:
         if not answer.get("ok"):
             raise _answer_error(name, answer)
         value = answer.get("value")
-        if isinstance(value, protocol.Unsupported):
+        if isinstance(value, values.Unsupported):
             raise UnsupportedValue(
                 f"{name} returned a {value.type}, which the grader cannot read: return "
                 "a number, a list or tuple of numbers, or a numpy array.")
