@@ -13,7 +13,7 @@ peers that run in this process:
 
 * **direct**: the same function called directly (what the bare floor pays);
 * **framed in process**: the same message and answer encoded and decoded with
-  :mod:`autograder.boundary.protocol`, without a second process (what the framing costs
+  :mod:`autograder.boundary.codec`, without a second process (what the framing costs
   without the system calls, the wake-ups and the clock).
 
 With the hull assignment (unless ``--no-hull``) it also grades its examples once
@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 
 from autograder.sandbox import affinity  # noqa: E402
 
-from autograder.boundary import protocol  # noqa: E402
+from autograder.boundary import codec  # noqa: E402
 from autograder.sandbox.cputime import process_cpu_seconds  # noqa: E402
 from autograder.engine.proxy import CallLog, Student  # noqa: E402
 from autograder.sandbox.policy import IsolationPolicy  # noqa: E402
@@ -68,12 +68,12 @@ def same(x: Any) -> Any:
 
 def framed(value: Any) -> Any:
     """The call's request and answer, encoded and decoded as the two processes do."""
-    tree, buffers = protocol.encode({"op": "call", "name": "same", "args": [value], "kwargs": {},
+    tree, buffers = codec.encode({"op": "call", "name": "same", "args": [value], "kwargs": {},
                                      "figures": False})
-    request = protocol.decode(tree, [bytearray(b) for b in buffers])
+    request = codec.decode(tree, [bytearray(b) for b in buffers])
     assert isinstance(request, dict)
-    tree, buffers = protocol.encode({"ok": True, "value": same(*request["args"]), "stdout": ""})
-    answer = protocol.decode(tree, [bytearray(b) for b in buffers])
+    tree, buffers = codec.encode({"ok": True, "value": same(*request["args"]), "stdout": ""})
+    answer = codec.decode(tree, [bytearray(b) for b in buffers])
     assert isinstance(answer, dict)
     return answer["value"]
 

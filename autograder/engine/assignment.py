@@ -42,10 +42,10 @@ from pathlib import Path
 from typing import Any
 
 import autograder
+from autograder.engine.forbidden import Rules
 from autograder.errors import AssignmentError
 
 __all__ = [
-    "Rules",
     "Assignment",
     "load_assignment",
     "list_assignments",
@@ -66,32 +66,6 @@ _ALLOWED = {
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
 _TOML = "assignment.toml"
-
-
-@dataclass(frozen=True)
-class Rules:
-    """What the static scan forbids, and the reason shown to the student.
-
-    Attributes
-    ----------
-    forbid : tuple of str
-        Dotted names: a module (``"scipy.spatial"``, everything under it) or an
-        attribute (``"scipy.interpolate.CubicSpline"``).
-    reason : str
-        The message given with a zero score for a forbidden use.
-    """
-
-    forbid: tuple[str, ...] = ()
-    reason: str = ""
-    #: forbidden names that allowed libraries need inside (``matplotlib.path`` for
-    #: drawing): student code may not name them, but the worker leaves the aliases
-    #: inside other libraries working
-    internal_use: tuple[str, ...] = ()
-
-    def to_wire(self) -> dict[str, object]:
-        """The plain data the worker's guard takes (see ``autograder.worker.guard``)."""
-        return {"names": list(self.forbid), "internal_use": list(self.internal_use),
-                "reason": self.reason}
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,13 @@ read afterwards how the student's code used it::
     assert np.all(np.isin(f.points, nodes)), "f was evaluated away from the nodes"
 
 How it works: the proxy (:mod:`autograder.engine.proxy`) replaces each callable in the
-arguments by a :class:`~autograder.boundary.protocol.CallableRef` registered in a
+arguments by a :class:`~autograder.boundary.values.CallableRef` registered in a
 :class:`CallbackRegistry` for that one call. The worker hands the student a
 stub; calling the stub sends the plain-data arguments back here, where
 :meth:`CallbackRegistry.answer` runs the real function and returns plain data.
 The function's code never enters the worker. A function declared safe
 (``traced(np.sin, safe=True)``, for names in
-:data:`~autograder.boundary.protocol.SAFE_FUNCTIONS`) is evaluated inside the worker
+:data:`~autograder.boundary.values.SAFE_FUNCTIONS`) is evaluated inside the worker
 instead, for speed; its calls and points are still counted and reported here.
 
 Misuse is bounded: more than :data:`MAX_CALLBACKS` callbacks in one call are
@@ -36,7 +36,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from autograder.boundary import protocol
+from autograder.boundary import limits, values
 from autograder.errors import AutograderError, UsageError
 
 __all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "CallRecord", "Traced", "traced",
@@ -159,7 +159,7 @@ def traced(function: Callable[..., Any], *, name: str = "f", safe: bool = False)
         name is never sent, so a hidden check's helper names stay hidden.
     safe : bool
         Evaluate the function inside the worker (much faster for many scalar
-        calls). Only for functions in :data:`autograder.boundary.protocol.SAFE_FUNCTIONS`
+        calls). Only for functions in :data:`autograder.boundary.values.SAFE_FUNCTIONS`
         (pure numpy ufuncs such as ``np.sin``); anything else raises
         :class:`~autograder.errors.UsageError`. The counts and points of a safe
         function are reported by the worker, which the student's code controls:
@@ -171,10 +171,10 @@ def traced(function: Callable[..., Any], *, name: str = "f", safe: bool = False)
 
 
 def _safe_name(function: Callable[..., Any]) -> str:
-    for name in sorted(protocol.SAFE_FUNCTIONS):
+    for name in sorted(values.SAFE_FUNCTIONS):
         if getattr(np, name.split(".", 1)[1], None) is function:
             return name
-    allowed = ", ".join(sorted(protocol.SAFE_FUNCTIONS))
+    allowed = ", ".join(sorted(values.SAFE_FUNCTIONS))
     raise UsageError(f"{function!r} cannot be evaluated inside the worker: only these numpy "
                      f"functions can ({allowed}). Leave out safe=True to evaluate it in the grader.")
 
@@ -191,7 +191,7 @@ def _plain_leaf(x: object) -> bool:
 def _holds_callable(value: Any, depth: int = 0) -> bool:
     """Whether ``value`` is or contains (in lists, tuples, dicts) something callable;
     fast on long lists of numbers, which most checks pass."""
-    if type(value) in _PLAIN_TYPES or depth > protocol.MAX_DEPTH:
+    if type(value) in _PLAIN_TYPES or depth > limits.MAX_DEPTH:
         return False
     if isinstance(value, dict):
         value = list(value.values())
@@ -210,7 +210,7 @@ class CallbackRegistry:
     """The functions passed in one student call; answers the worker's callback requests."""
 
     def __init__(self, *, max_callbacks: int | None = None,
-                 own_ref: Callable[[object], protocol.CallableRef | None] | None = None) -> None:
+                 own_ref: Callable[[object], values.CallableRef | None] | None = None) -> None:
         self.functions: dict[str, Traced] = {}
         self.max_callbacks = MAX_CALLBACKS if max_callbacks is None else max_callbacks
         self.callbacks = 0
@@ -228,7 +228,7 @@ class CallbackRegistry:
         replaced by a ref registered here; plain values are returned as they are."""
         if _depth == 0 and not _holds_callable(value):
             return value
-        if _plain_leaf(value) or _depth > protocol.MAX_DEPTH:
+        if _plain_leaf(value) or _depth > limits.MAX_DEPTH:
             return value
         if isinstance(value, (list, tuple)):
             items = [self.export(v, _depth + 1) for v in value]
@@ -247,12 +247,12 @@ class CallbackRegistry:
             return self._register(traced(value))
         return value
 
-    def _register(self, function: Traced) -> protocol.CallableRef:
+    def _register(self, function: Traced) -> values.CallableRef:
         ref_id = self._ids.get(id(function))
         if ref_id is None:
             ref_id = self._ids[id(function)] = f"g{len(self._ids) + 1}"
             self.functions[ref_id] = function
-        return protocol.CallableRef(ref_id, function.name, function.safe)
+        return values.CallableRef(ref_id, function.name, function.safe)
 
     # -- incoming ----------------------------------------------------------------
     def answer(self, message: dict[str, Any]) -> dict[str, Any]:
@@ -320,17 +320,17 @@ def _error(kind: str, message: str, *, error: str = "exception") -> dict[str, An
             "message": message}
 
 
-def _first_unsupported(value: Any, depth: int = 0) -> protocol.Unsupported | None:
-    if type(value) is protocol.Unsupported:
+def _first_unsupported(value: Any, depth: int = 0) -> values.Unsupported | None:
+    if type(value) is values.Unsupported:
         return value
-    if type(value) is protocol.CallableRef:
-        return protocol.Unsupported("function", "function", "functions cannot be passed back")
-    if depth < protocol.MAX_DEPTH and type(value) in (list, tuple):
+    if type(value) is values.CallableRef:
+        return values.Unsupported("function", "function", "functions cannot be passed back")
+    if depth < limits.MAX_DEPTH and type(value) in (list, tuple):
         for item in value:
             found = _first_unsupported(item, depth + 1)
             if found is not None:
                 return found
-    if depth < protocol.MAX_DEPTH and type(value) is dict:
+    if depth < limits.MAX_DEPTH and type(value) is dict:
         return _first_unsupported(list(value.values()), depth + 1)
     return None
 

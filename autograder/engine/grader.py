@@ -19,9 +19,15 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import autograder
-from autograder.engine import staticscan
 from autograder.engine.assignment import Assignment
 from autograder.engine.checkrun import CheckSuite, forget_check_modules
+from autograder.engine.forbidden import (
+    forbidden_functions,
+    forbidden_module_paths,
+    review_notes,
+    scan_sources,
+    warm_up,
+)
 from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
@@ -198,8 +204,7 @@ class Grader:
         try:
             self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0, None),
                                 assignment_digest(self.assignment))
-            if self.assignment.rules.forbid:  # imports IPython's transformer meanwhile too
-                staticscan.scan((), self.assignment.rules.forbid)
+            warm_up(self.assignment.rules)  # imports IPython's transformer meanwhile too
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass
@@ -259,9 +264,8 @@ class Grader:
                         digest: str) -> SubmissionResult:
         cells = [(c.index, c.source) for c in notebook.cells]
         sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
-        report = staticscan.scan(sources, self.assignment.rules.forbid) \
-            if self.assignment.rules.forbid else staticscan.ScanFindings()
-        forbidden = forbidden_functions(self.assignment, sources, numbers, report)
+        report = scan_sources(self.assignment.rules, sources)
+        forbidden = forbidden_functions(self.assignment.rules, sources, numbers, report)
         notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
         call_timeout = self.options.call_timeout or self.assignment.call_timeout
         budget = self.options.cpu_budget or notebook_timeout + 20 * call_timeout
@@ -346,78 +350,12 @@ class Grader:
         roots = {self.assignment.root.resolve(), self.assignment.root.resolve().parent}
         if out_dir is not None:  # the batch's result folder: every student's results
             roots.add(out_dir.resolve().parent)
-        roots.update(forbidden_module_paths(self.assignment))
+        roots.update(forbidden_module_paths(self.assignment.rules))
         package = Path(autograder.__file__).resolve().parent
         roots.add(package)
         if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
             roots.add(package.parent)
         return sorted(roots)
-
-
-@functools.lru_cache(maxsize=32)
-def _module_paths(names: tuple[str, ...]) -> tuple[Path, ...]:
-    found: list[Path] = []
-    for name in names:
-        try:
-            spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError, AttributeError):  # not installed, or an attribute
-            continue
-        if spec is None:
-            continue
-        if spec.submodule_search_locations:
-            found += [Path(p).resolve() for p in spec.submodule_search_locations]
-        elif spec.origin and os.path.isabs(spec.origin):
-            found.append(Path(spec.origin).resolve())
-    return tuple(found)
-
-
-def forbidden_module_paths(assignment: Assignment) -> tuple[Path, ...]:
-    """Files and folders of the forbidden modules, kept out of the worker's reach.
-
-    Names an allowed library needs inside (``[rules] internal_use``) stay readable.
-    """
-    rules = assignment.rules
-    return _module_paths(tuple(n for n in rules.forbid if n not in rules.internal_use))
-
-
-#: how a note that asks for a person starts (the class summary lists such submissions)
-REVIEW_PREFIX = "For the instructor: "
-
-
-def review_notes(report: staticscan.ScanFindings, cell_numbers: Sequence[int]) -> tuple[str, ...]:
-    """Notes for the "needs a person" list: code the scan could not verify.
-
-    The worker's guard still blocks forbidden libraries at run time whatever the
-    spelling; these notes let a person see why the scan could not tell.
-    """
-    if not report.dynamic:
-        return ()
-    places = "; ".join(
-        f"`{use.name}` in cell {(cell_numbers[use.cell] if use.cell < len(cell_numbers) else use.cell) + 1}"
-        f", line {use.line}" for use in report.dynamic[:5])
-    reaching = ", ".join(sorted(report.unverified)[:10]) or "no top-level function"
-    return (f"{REVIEW_PREFIX}the code scan could not verify {len(report.dynamic)} place(s) "
-            f"({places}); reached from: {reaching}.",)
-
-
-def forbidden_functions(assignment: Assignment, sources: Sequence[str],
-                        cell_numbers: Sequence[int],
-                        report: staticscan.ScanFindings | None = None) -> dict[str, str]:
-    """Map each student function that uses a forbidden name to the message for it."""
-    if not assignment.rules.forbid:
-        return {}
-    report = report or staticscan.scan(sources, assignment.rules.forbid)
-    messages: dict[str, str] = {}
-    for function in sorted(report.tainted):
-        use = next((u for u in report.uses if u.function == function), None) or \
-            next((u for u in report.uses if u.function is not None), None)
-        where = ""
-        if use is not None:
-            cell = cell_numbers[use.cell] if use.cell < len(cell_numbers) else use.cell
-            where = f" (`{use.name}` in cell {cell + 1}, line {use.line})"
-        messages[function] = (f"`{function}` uses a name this assignment does not allow{where}. "
-                              f"{assignment.rules.reason}")
-    return messages
 
 
 def summarise_run(run: NotebookRun, notebook: Notebook) -> str:
@@ -482,10 +420,8 @@ def _file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-__all__ = ["ENGINE_VERSION", "REVIEW_PREFIX", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
-           "forget_check_modules",
-           "forbidden_functions", "review_notes", "submission_key", "submission_seed",
-           "summarise_run"]
+__all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
+           "forget_check_modules", "submission_key", "submission_seed", "summarise_run"]
 
 
 def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException | str) -> SubmissionResult:

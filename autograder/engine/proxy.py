@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol
 
-from autograder.boundary import protocol
+from autograder.boundary import values
 from autograder.engine.callbacks import CallbackRegistry, limit_message
 from autograder.errors import (
     ForbiddenUse,
@@ -136,15 +136,15 @@ class Student:
             name = next(iter(registry.functions.values())).name
             raise StudentException(f"{what}: " + limit_message(name, registry.max_callbacks))
         returned = f"the function returned by {what}"
-        value = protocol.replace_refs(value, lambda ref: StudentFunction(self, ref, returned))
+        value = values.replace_refs(value, lambda ref: StudentFunction(self, ref, returned))
         return value, figures
 
-    def _own_ref(self, value: object) -> protocol.CallableRef | None:
+    def _own_ref(self, value: object) -> values.CallableRef | None:
         if isinstance(value, StudentFunction) and value._student is self:
             return value._ref
         return None
 
-    def _call_ref(self, ref: protocol.CallableRef, args: list[Any], kwargs: dict[str, Any],
+    def _call_ref(self, ref: values.CallableRef, args: list[Any], kwargs: dict[str, Any],
                   what: str) -> tuple[Any, list[Any]]:
         request = getattr(self._target, "request", None)
         if request is None:
@@ -154,7 +154,7 @@ class Student:
         if not answer.get("ok"):
             raise _ref_error(what, answer)
         value = answer.get("value")
-        if isinstance(value, protocol.Unsupported):
+        if isinstance(value, values.Unsupported):
             raise UnsupportedValue(f"{what} returned a {value.type}, which the grader cannot "
                                    "read: return a number, a list or tuple of numbers, or a "
                                    "numpy array.")
@@ -170,7 +170,7 @@ class StudentFunction:
     runs, that is, during the checks of this submission.
     """
 
-    def __init__(self, student: Student, ref: protocol.CallableRef, what: str) -> None:
+    def __init__(self, student: Student, ref: values.CallableRef, what: str) -> None:
         self._student = student
         self._ref = ref
         #: how messages name it: "the function returned by make_interpolant()"

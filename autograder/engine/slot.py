@@ -18,8 +18,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from autograder.boundary import protocol
-from autograder.errors import AutograderError
+from autograder.boundary import frames
+from autograder.errors import AutograderError, ProtocolError
 from autograder.sandbox import affinity
 from autograder.sandbox.reaper import kill_descendants
 from autograder.sandbox.tempdirs import OwnedFolder
@@ -162,8 +162,8 @@ class GradingSlot:
     def _greet(self) -> None:
         assert self._control is not None
         try:
-            hello = protocol.recv_message(self._control, timeout=STARTUP_TIMEOUT)
-        except (EOFError, OSError, protocol.ProtocolError) as exc:
+            hello = frames.recv_message(self._control, timeout=STARTUP_TIMEOUT)
+        except (EOFError, OSError, ProtocolError) as exc:
             detail = self._stderr_tail()
             self.close()
             raise AutograderError(f"the grading worker did not start: {exc}. {detail}") from exc
@@ -188,11 +188,11 @@ class GradingSlot:
             ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
             try:
                 assert self._control is not None
-                protocol.send_message(self._control, request)
+                frames.send_message(self._control, request)
                 socket.send_fds(self._control, [b"F"], [theirs.fileno()])
-                answer = protocol.recv_message(self._control, timeout=30)
+                answer = frames.recv_message(self._control, timeout=30)
                 return int(answer["pid"]), ours
-            except (OSError, EOFError, protocol.ProtocolError, KeyError, TypeError):
+            except (OSError, EOFError, ProtocolError, KeyError, TypeError):
                 ours.close()
                 self.close()
                 if attempt == 2:

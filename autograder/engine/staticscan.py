@@ -2,7 +2,9 @@
 
 This runs in the trusted process, on the cells' text only. Each cell is turned
 from IPython syntax into Python with IPython's own ``TransformerManager`` (so
-``%magics`` and ``!commands`` parse), then walked with :mod:`ast`:
+``%magics`` and ``!commands`` parse; see :mod:`autograder.engine.scanipython`),
+then walked with :mod:`ast`; what the walk finds is reported as
+:class:`~autograder.engine.scanfindings.ScanFindings`:
 
 * **Names are resolved through imports and aliases.** ``import scipy.spatial as
   sp; sp.ConvexHull``, ``from scipy.spatial import ConvexHull as CH``,
@@ -28,8 +30,9 @@ from IPython syntax into Python with IPython's own ``TransformerManager`` (so
   ``importlib.import_module`` with a computed name, ``getattr`` on a module
   with a computed name, ``runpy``, ``%run``, ``%%writefile`` and
   ``get_ipython().ex/run_cell/...`` cannot be verified: they are reported in
-  :attr:`ScanFindings.dynamic`, and the top-level names reaching them in
-  :attr:`ScanFindings.unverified`.
+  :attr:`~autograder.engine.scanfindings.ScanFindings.dynamic`, and the
+  top-level names reaching them in
+  :attr:`~autograder.engine.scanfindings.ScanFindings.unverified`.
 * **Magics that run Python** (``%time``, ``%timeit``, ``%prun``, ``%debug``,
   ``%%time``, ``%%timeit``, ``%%capture``, ``%%prun``, ``%%debug``) have their
   code scanned as if written in the cell.
@@ -43,9 +46,11 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Callable, Iterable, Sequence
 
+from autograder.engine.scanfindings import ScanFindings, Use
+from autograder.engine.scanipython import CellParser, ipython_call
 from autograder.errors import UsageError
 
-__all__ = ["Use", "ScanFindings", "scan"]
+__all__ = ["scan"]
 
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
 _BUILTINS = frozenset(dir(builtins)) | {"get_ipython", "display", "__builtins__"}
@@ -55,70 +60,10 @@ _IMPORT_FUNCS = frozenset({"builtins.__import__", "importlib.import_module",
                            "importlib.__import__"})
 _EXEC_FUNCS = frozenset({"builtins.exec", "builtins.eval", "builtins.compile",
                          "runpy.run_path", "runpy.run_module"})
-_IPYTHON_SAFE = frozenset({"run_line_magic", "run_cell_magic", "system", "getoutput",
-                           "set_next_input", "showtraceback"})
-_CODE_MAGICS = frozenset({"time", "timeit", "prun", "debug", "capture"})
-_UNVERIFIABLE_LINE_MAGICS = frozenset({"run", "load_ext", "reload_ext", "aimport"})
-_UNVERIFIABLE_CELL_MAGICS = frozenset({"writefile", "file"})
-_MAGIC_OPTIONS_WITH_VALUE = frozenset({"-n", "-r", "-p", "-l", "-s", "-T", "-D"})
 _TEXT_LIMIT = 200
 _COMPREHENSIONS = (ast.ListComp, ast.SetComp, ast.DictComp, ast.GeneratorExp)
 _NESTED_SCOPES = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Lambda,
                   *_COMPREHENSIONS)
-
-
-@dataclass(frozen=True)
-class Use:
-    """One use of a forbidden (or unverifiable) name.
-
-    Attributes
-    ----------
-    name : str
-        The forbidden entry matched (``"scipy.spatial"``); for a dynamic use,
-        what was called (``"exec"``, ``"importlib.import_module"``, ``"%run"``).
-    function : str or None
-        The top-level function (or class) whose body holds the use; ``None``
-        at module level.
-    cell : int
-        Position of the cell in the ``sources`` given to :func:`scan`.
-    line : int
-        Line in the cell, counting from 1.
-    text : str
-        That source line, stripped (and cut to 200 characters).
-    """
-
-    name: str
-    function: str | None
-    cell: int
-    line: int
-    text: str
-
-
-@dataclass(frozen=True)
-class ScanFindings:
-    """What :func:`scan` found.
-
-    Attributes
-    ----------
-    uses : tuple of Use
-        Every use of a forbidden name, sorted by cell and line.
-    tainted : frozenset of str
-        Top-level names that use a forbidden name directly or through other
-        top-level names; a check calling one of them scores zero.
-    dynamic : tuple of Use
-        Code that could not be verified (``exec``, computed imports, ...).
-    errors : tuple of str
-        Cells (or magic bodies) that could not be parsed:
-        ``"cell 2, line 3: invalid syntax"``; the other cells are still scanned.
-    unverified : frozenset of str
-        Top-level names reaching a dynamic use (directly or through others).
-    """
-
-    uses: tuple[Use, ...] = ()
-    tainted: frozenset[str] = frozenset()
-    dynamic: tuple[Use, ...] = ()
-    errors: tuple[str, ...] = ()
-    unverified: frozenset[str] = frozenset()
 
 
 def scan(sources: Sequence[str], forbid: Sequence[str]) -> ScanFindings:
@@ -254,11 +199,7 @@ class _Analyzer:
         self.uses: list[Use] = []
         self.dynamic: list[Use] = []
         self.errors: list[str] = []
-        # Imported here, not at the top: importing IPython costs the grader 0.2 s, and
-        # the command starts its warm worker before its first scan.
-        from IPython.core.inputtransformer2 import TransformerManager
-
-        self.transformer = TransformerManager()
+        self.parser = CellParser()
         #: statements walked so far; past MAX_STATEMENTS the scan stops (a count, not a
         #: clock, so the same code always gets the same report)
         self.statements = 0
@@ -271,7 +212,7 @@ class _Analyzer:
 
     def _parse(self, source: str, where: _Where, label: str) -> ast.Module | None:
         try:
-            return self._parse_python(source) or ast.parse(self.transformer.transform_cell(source))
+            return self.parser.parse(source)
         except SyntaxError as exc:
             line = where.fixed if where.fixed is not None else where.base + (exc.lineno or 1)
             self._error(where, line, f"{exc.msg}{label}")
@@ -286,27 +227,6 @@ class _Analyzer:
             self._error(where, where.line(), f"IPython syntax could not be "
                         f"converted ({type(exc).__name__}){label}")
         return None
-
-    def _parse_python(self, source: str) -> ast.Module | None:
-        """The tree of a cell that is Python once IPython's line passes ran; else None.
-
-        ``transform_cell`` runs line passes (blank first lines, common indentation,
-        pasted prompts, a ``%%`` cell magic), then token passes that tokenize the
-        whole cell for each special line (``%magic``, ``!cmd``, ``a = %magic``,
-        ``obj?``), most of a scan's cost. Every token pass looks for a token that
-        cannot stand there in Python, so code that parses after the line passes
-        is what ``transform_cell`` would return: it is parsed without them. Any
-        other cell (or any failure here) takes the whole ``transform_cell``, so
-        its tree, or its error, is exactly as before.
-        """
-        cell = source if source.endswith("\n") else source + "\n"
-        lines = cell.splitlines(keepends=True)
-        try:
-            for transform in self.transformer.cleanup_transforms + self.transformer.line_transforms:
-                lines = transform(lines)
-            return ast.parse("".join(lines))
-        except Exception:  # noqa: BLE001 - the whole transform decides, and reports
-            return None
 
     def _error(self, where: _Where, line: int, message: str) -> None:
         self.errors.append(f"cell {where.cell}, line {line}: {message}")
@@ -685,40 +605,14 @@ class _Analyzer:
     # -- IPython ---------------------------------------------------------------------
 
     def _ipython(self, method: str, node: ast.Call, ctx: _Ctx) -> None:
-        if method == "run_line_magic":
-            self._line_magic(node, ctx)
-        elif method == "run_cell_magic":
-            self._cell_magic(node, ctx)
-        elif method not in _IPYTHON_SAFE:
-            self._dynamic(f"get_ipython().{method}", node, ctx)
-
-    def _line_magic(self, node: ast.Call, ctx: _Ctx) -> None:
-        args = [*node.args, None, None]
-        name, arg = _literal_str(args[0]), _literal_str(args[1])
-        if name is None or arg is None:
-            self._dynamic("%<computed magic>", node, ctx)
-        elif name in _CODE_MAGICS:
-            where = replace(ctx.where, fixed=ctx.where.line(node))
-            self._run_code(_strip_magic_options(arg), replace(ctx, where=where),
-                           label=f" (in %{name})")
-        elif name in _UNVERIFIABLE_LINE_MAGICS:
-            self._dynamic(f"%{name}", node, ctx)
-
-    def _cell_magic(self, node: ast.Call, ctx: _Ctx) -> None:
-        args = [*node.args, None, None, None]
-        name, line, body = (_literal_str(a) for a in args[:3])
-        if name is None or body is None:
-            self._dynamic("%%<computed magic>", node, ctx)
-        elif name in _CODE_MAGICS:
-            here = ctx.where.line(node)
-            if name == "timeit" and line:
-                fixed = replace(ctx.where, fixed=here)
-                self._run_code(_strip_magic_options(line), replace(ctx, where=fixed),
-                               label=" (in %%timeit)")
-            where = replace(ctx.where, base=here, fixed=None)
-            self._run_code(body, replace(ctx, where=where), label=f" (in %%{name})")
-        elif name in _UNVERIFIABLE_CELL_MAGICS:
-            self._dynamic(f"%%{name}", node, ctx)
+        code, unverifiable = ipython_call(method, [_literal_str(a) for a in node.args])
+        if unverifiable is not None:
+            self._dynamic(unverifiable, node, ctx)
+        here = ctx.where.line(node)
+        for part in code:
+            where = (replace(ctx.where, fixed=here) if part.fixed else
+                     replace(ctx.where, base=here, fixed=None))
+            self._run_code(part.source, replace(ctx, where=where), label=part.label)
 
     # -- the report ------------------------------------------------------------------
 
@@ -832,15 +726,3 @@ def _pattern_names(pattern: ast.AST) -> set[str]:
         elif isinstance(node, ast.MatchMapping) and node.rest:
             names.add(node.rest)
     return names
-
-
-def _strip_magic_options(arg: str) -> str:
-    """The code of a ``%timeit -n 10 -r 3 code`` style argument."""
-    words = arg.split(" ")
-    while words and words[0].startswith("-"):
-        option = words.pop(0)
-        if option in _MAGIC_OPTIONS_WITH_VALUE and words:
-            words.pop(0)
-        while words and words[0] == "":
-            words.pop(0)
-    return " ".join(words)

@@ -22,7 +22,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from autograder.boundary import protocol
+from autograder.boundary import frames, values
 from autograder.engine.slot import GradingSlot
 from autograder.errors import (
     CallTimeout,
@@ -30,6 +30,7 @@ from autograder.errors import (
     ForbiddenUse,
     MissingFunction,
     NotRun,
+    ProtocolError,
     StudentError,
     StudentException,
     UnsupportedValue,
@@ -200,7 +201,7 @@ class StudentProcess:
                     spent = self._clock.used()
                     self._kill()
                     return "timeout", current, None
-                except (EOFError, OSError, protocol.ProtocolError) as exc:
+                except (EOFError, OSError, ProtocolError) as exc:
                     self._kill()
                     if not started:  # the engine's own set-up failed, not the student
                         raise EngineError(
@@ -281,7 +282,7 @@ class StudentProcess:
             if readable:
                 # A frame has started: the child may still stall inside it, so the
                 # wall-clock backstop bounds the rest of the read.
-                return protocol.recv_message(self._sock, timeout=max(wall_left, 1.0))
+                return frames.recv_message(self._sock, timeout=max(wall_left, 1.0))
             used = self._clock.used()
 
     def _kill(self) -> None:
@@ -306,7 +307,7 @@ class StudentProcess:
     def close(self) -> None:
         if self._sock is not None:
             try:
-                protocol.send_message(self._sock, {"op": "bye"})
+                frames.send_message(self._sock, {"op": "bye"})
             except OSError:
                 pass
         self._kill()
@@ -351,14 +352,14 @@ class StudentProcess:
         self._clock.start()
         wall_deadline = time.monotonic() + wall_backstop(limit)
         try:
-            protocol.send_message(self._sock, message)
+            frames.send_message(self._sock, message)
             while True:
                 answer = self._await(limit, wall_deadline)
                 if not (isinstance(answer, dict) and answer.get("op") == "callback"):
                     break
                 reply = (self.on_callback(answer) if self.on_callback is not None else
                          {"op": "callback-result", "ok": False, "error": "no callbacks"})
-                protocol.send_message(self._sock, reply)
+                frames.send_message(self._sock, reply)
         except TimeoutError:
             used = spent = self._clock.used()
             self._kill()
@@ -369,7 +370,7 @@ class StudentProcess:
             raise CallTimeout(
                 f"{what} did not return within {wall_backstop(limit):g} s although it used "
                 f"only {used:.1f} s of CPU: it was waiting (sleep, input, a lock, a pipe).") from None
-        except protocol.ProtocolError as exc:
+        except ProtocolError as exc:
             self._kill()
             raise UnsupportedValue(
                 f"{what} returned a value the grader cannot read ({exc}); return a number, "
@@ -417,7 +418,7 @@ class StudentProcess:
         if not answer.get("ok"):
             raise _answer_error(name, answer)
         value = answer.get("value")
-        if isinstance(value, protocol.Unsupported):
+        if isinstance(value, values.Unsupported):
             raise UnsupportedValue(
                 f"{name} returned a {value.type}, which the grader cannot read: return "
                 "a number, a list or tuple of numbers, or a numpy array.")

@@ -6,7 +6,7 @@ worker slot; each submission then costs a ``fork()``. The standard library's
 ``multiprocessing`` forkserver does the same trick but sends pickles both ways,
 which the trust boundary forbids, so this small loop is written by hand.
 
-Control messages (JSON frames from :mod:`autograder.boundary.protocol`):
+Control messages (JSON frames from :mod:`autograder.boundary.frames`):
 
 * grader -> parent ``{"op": "spawn", ...}`` followed by one file descriptor
   (the submission's socket, sent with ``SCM_RIGHTS``);
@@ -61,7 +61,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot  # noqa: E402,F401
 import matplotlib.tri  # noqa: E402,F401
 
-from autograder.boundary import protocol  # noqa: E402
+from autograder.boundary import frames  # noqa: E402
+from autograder.errors import ProtocolError  # noqa: E402
 
 from autograder.sandbox import confine, landlock, readable  # noqa: E402
 from autograder.sandbox.policy import IsolationPolicy, Limits  # noqa: E402
@@ -121,16 +122,16 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         _die_with_parent()
         gap = _unreadable_path()
         if gap is not None:
-            protocol.send_message(sock, {"op": "sandbox-broken", "path": gap[0], "error": gap[1]})
+            frames.send_message(sock, {"op": "sandbox-broken", "path": gap[0], "error": gap[1]})
             return
         if _forbid_key(request) != _APPLIED[0]:  # the warm parent applied another list
             notes = (*notes, *_apply_forbid(request))
         output = execute.capture_output(policy.limits.output_bytes)
-        protocol.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
+        frames.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
         run.run([(int(i), str(s)) for i, s in json.loads(request["cells_json"])],
                 lambda i: _announce(sock, i))
-        protocol.send_message(sock, {
+        frames.send_message(sock, {
             "op": "ready",
             "cells": [o.to_wire() for o in run.outcomes],
             "stdout": output.take(),
@@ -219,7 +220,7 @@ def _unreadable_path() -> tuple[str, str] | None:
 
 def _announce(sock: socket.socket, index: int) -> None:
     """Tell the grader which cell starts now (so a hang is pinned to its cell)."""
-    protocol.send_message(sock, {"op": "cell", "index": index})
+    frames.send_message(sock, {"op": "cell", "index": index})
 
 
 def _quiet_standard_streams() -> None:
@@ -232,9 +233,9 @@ def _quiet_standard_streams() -> None:
 
 def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     try:
-        request = protocol.recv_message(control)
+        request = frames.recv_message(control)
         _, fds, _, _ = socket.recv_fds(control, 1, 1)
-    except (EOFError, OSError, protocol.ProtocolError):
+    except (EOFError, OSError, ProtocolError):
         return False
     if not isinstance(request, dict) or request.get("op") != "spawn" or len(fds) != 1:
         return False
@@ -263,7 +264,7 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
         control.close()
         _child(sub, request, shell, shared)
     sub.close()
-    protocol.send_message(control, {"pid": pid})
+    frames.send_message(control, {"pid": pid})
     _FORKED[0] += 1
     if _FORKED[0] == hugepages.COLLAPSE_AFTER:  # while that child runs; a short batch never pays
         hugepages.collapse()
@@ -282,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     readable.prime_caches()
     seccomp.prepare_filters()
     signal.signal(signal.SIGCHLD, _reap)
-    protocol.send_message(control, {"op": "hello", "pid": os.getpid(),
+    frames.send_message(control, {"op": "hello", "pid": os.getpid(),
                                     "python": sys.version.split()[0], "time": time.time()})
     while _spawn(control, shell):
         pass

@@ -4,14 +4,14 @@ Checks cannot hold a student's ``Figure`` (it would have to be unpickled in
 the grader), so the worker reads what a check may want to compare out of the
 figure: line data, scatter offsets, collection paths (contours, tripcolor,
 fill_between), patches, images, texts, limits and labels, and renders a PNG
-for feedback. Arrays are float64 ``ndarray`` so :mod:`autograder.boundary.protocol`
+for feedback. Arrays are float64 ``ndarray`` so :mod:`autograder.boundary.codec`
 sends them as binary buffers.
 
 Extraction runs over student artists: every artist (and every axes field) is
 read inside its own ``try``; a failure skips that item and adds a line to the
 figure's ``"notes"`` instead of breaking the whole figure.
 
-Figure data (a dict, the ``"$t"`` key marks it for the protocol)::
+Figure data (a dict, the ``"$t"`` key marks it for the codec)::
 
     {"$t": "figure",
      "axes": [{"lines": [{"x", "y", "label", "color", "linestyle", "marker"}],

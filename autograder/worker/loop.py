@@ -1,17 +1,17 @@
 """Answer the grader's requests inside the sandboxed child.
 
-Requests and answers are plain data (see :mod:`autograder.boundary.protocol`). The child
+Requests and answers are plain data (see :mod:`autograder.boundary.codec`). The child
 never learns what a check expects: it only runs the function it is asked to run
 and sends back what came out.
 
 Functions across the boundary
 -----------------------------
-A function a check passes arrives as a :class:`~autograder.boundary.protocol.CallableRef`
+A function a check passes arrives as a :class:`~autograder.boundary.values.CallableRef`
 and is handed to the student as a :class:`GraderFunction` stub. Calling the
 stub sends ``{"op": "callback", "id", "args", "kwargs"}`` to the grader, which
 runs the real function on its side and answers ``{"op": "callback-result",
 ...}``; the function's code never enters this process. A ref with a ``safe``
-name (a pure numpy ufunc from :data:`~autograder.boundary.protocol.SAFE_FUNCTIONS`) is
+name (a pure numpy ufunc from :data:`~autograder.boundary.values.SAFE_FUNCTIONS`) is
 evaluated here instead, and its calls are counted and reported to the grader
 (``{"op": "callback", "tally": [...]}``, acknowledged but not waited for)
 before the call's answer. A stub is
@@ -31,12 +31,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from autograder.boundary import protocol
+from autograder.boundary import codec, frames, values
+from autograder.errors import ProtocolError
 from autograder.worker import figures
 from autograder.worker.execute import BoundedText, GradingShell
 
 #: frames from these files are the worker's own plumbing, not the student's code
-_OWN_FILES = ("autograder/worker/", "autograder/boundary/protocol.py")
+_OWN_FILES = ("autograder/worker/", "autograder/boundary/codec.py", "autograder/boundary/frames.py")
 #: most functions the student may return over one submission (each is kept until the end)
 MAX_RETURNED_FUNCTIONS = 10_000
 #: most evaluation points recorded per safe function and call (calls are always counted)
@@ -64,10 +65,10 @@ class CallbackLimitExceeded(BaseException):
 
 def student_traceback(exc: BaseException) -> str:
     """The traceback of ``exc`` without the worker's own frames."""
-    frames = [f for f in traceback.extract_tb(exc.__traceback__)
-              if not any(own in f.filename.replace("\\", "/") for own in _OWN_FILES)]
+    shown = [f for f in traceback.extract_tb(exc.__traceback__)
+             if not any(own in f.filename.replace("\\", "/") for own in _OWN_FILES)]
     lines = ["Traceback (most recent call last):\n"]
-    lines += traceback.format_list(frames)
+    lines += traceback.format_list(shown)
     lines += traceback.format_exception_only(type(exc), exc)
     return "".join(lines)[-20_000:]
 
@@ -84,7 +85,7 @@ class GraderFunction:
 
     __slots__ = ("_channel", "_ref", "_generation", "_local", "_calls", "_points", "_recorded")
 
-    def __init__(self, channel: "Channel", ref: protocol.CallableRef) -> None:
+    def __init__(self, channel: "Channel", ref: values.CallableRef) -> None:
         self._channel = channel
         self._ref = ref
         self._generation = channel.generation
@@ -130,7 +131,7 @@ class GraderFunction:
 
 def _safe_function(name: str) -> Callable[..., Any] | None:
     """The numpy function a safe name stands for (names are checked when decoded)."""
-    if not name or name not in protocol.SAFE_FUNCTIONS:
+    if not name or name not in values.SAFE_FUNCTIONS:
         return None
     function = getattr(np, name.split(".", 1)[1], None)
     return function if isinstance(function, np.ufunc) else None
@@ -153,20 +154,20 @@ class Channel:
     def stubs(self, value: Any) -> Any:
         """``value`` with each ref replaced by a stub bound to the coming call (or by the
         student's own function, for a ref the student returned earlier)."""
-        return protocol.replace_refs(value, self._resolve)
+        return values.replace_refs(value, self._resolve)
 
-    def _resolve(self, ref: protocol.CallableRef) -> Any:
+    def _resolve(self, ref: values.CallableRef) -> Any:
         own = self.returned.get(ref.id)
         return GraderFunction(self, ref) if own is None else own
 
-    def callback(self, ref: protocol.CallableRef, args: tuple, kwargs: dict[str, Any]) -> Any:
+    def callback(self, ref: values.CallableRef, args: tuple, kwargs: dict[str, Any]) -> Any:
         """Ask the grader to evaluate ``ref``; return its value or raise its error here."""
         if self.limited:
             raise CallbackLimitExceeded(self.limited)
         message = {"op": "callback", "id": ref.id, "args": list(args), "kwargs": kwargs}
         try:
-            tree, buffers = protocol.encode(message)
-        except protocol.ProtocolError as exc:
+            tree, buffers = codec.encode(message)
+        except ProtocolError as exc:
             raise TypeError(f"the arguments passed to `{ref.name}` cannot be sent: {exc}; "
                             "pass numbers or numpy arrays of numbers") from None
         reply = self._exchange(tree, buffers)
@@ -174,7 +175,7 @@ class Channel:
             raise RuntimeError(f"the grader sent no answer for `{ref.name}`")
         if reply.get("ok"):
             value = reply.get("value")
-            if isinstance(value, protocol.Unsupported):
+            if isinstance(value, values.Unsupported):
                 raise TypeError(f"`{ref.name}` gave a value that cannot be sent to your code")
             return value
         error, message_text = str(reply.get("error", "")), str(reply.get("message", ""))[:2000]
@@ -187,9 +188,9 @@ class Channel:
 
     def _exchange(self, tree: Any, buffers: list[Any]) -> Any:
         try:
-            protocol.send_frame(self.sock, tree, buffers)
-            return protocol.recv_message(self.sock)
-        except (EOFError, OSError, protocol.ProtocolError):
+            frames.send_frame(self.sock, tree, buffers)
+            return frames.recv_message(self.sock)
+        except (EOFError, OSError, ProtocolError):
             os._exit(0)  # the grader is gone or out of step: nothing is left to do here
 
     def end_call(self) -> None:
@@ -200,15 +201,15 @@ class Channel:
         if used:
             # Not waited for: the grader's acknowledgement arrives before its next
             # request and the serving loop skips it, which saves a round trip per call.
-            tree, buffers = protocol.encode({"op": "callback",
+            tree, buffers = codec.encode({"op": "callback",
                                              "tally": [stub._tally() for stub in used]})
             try:
-                protocol.send_frame(self.sock, tree, buffers)
-            except (OSError, protocol.ProtocolError):
+                frames.send_frame(self.sock, tree, buffers)
+            except (OSError, ProtocolError):
                 os._exit(0)
 
     # -- functions the student returns ------------------------------------------
-    def export(self, value: object) -> protocol.CallableRef | None:
+    def export(self, value: object) -> values.CallableRef | None:
         """A ref for a function the student returns (``None`` once the table is full)."""
         if len(self.returned) >= MAX_RETURNED_FUNCTIONS:
             return None
@@ -218,7 +219,7 @@ class Channel:
         # The type's name, read without running student code (a function's own
         # __name__ could be a property of a class it pretends to be).
         name = type.__getattribute__(type(value), "__name__")
-        return protocol.CallableRef(ref_id, name if type(name) is str else "function")
+        return values.CallableRef(ref_id, name if type(name) is str else "function")
 
 
 def _invoke(channel: Channel, target: Any, request: dict[str, Any]) -> dict[str, Any]:
@@ -288,8 +289,8 @@ def serve(sock: socket.socket, shell: GradingShell, output: BoundedText) -> None
     channel = Channel(sock)
     while True:
         try:
-            request = protocol.recv_message(sock)
-        except (EOFError, OSError, protocol.ProtocolError):
+            request = frames.recv_message(sock)
+        except (EOFError, OSError, ProtocolError):
             return
         if not isinstance(request, dict) or request.get("op") == "bye":
             return
@@ -303,8 +304,8 @@ def send_answer(sock: socket.socket, answer: dict[str, Any], channel: Channel | 
     """Send ``answer``; a value that cannot be framed becomes an 'unsupported' answer."""
     export = channel.export if channel is not None else None
     try:
-        protocol.send_message(sock, answer, figure_encoder=figures.figure_to_data,
+        frames.send_message(sock, answer, figure_encoder=figures.figure_to_data,
                               callable_encoder=export)
-    except protocol.ProtocolError as exc:
-        protocol.send_message(sock, {"ok": False, "error": "unsupported",
+    except ProtocolError as exc:
+        frames.send_message(sock, {"ok": False, "error": "unsupported",
                                      "message": str(exc), "stdout": ""})

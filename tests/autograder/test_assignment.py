@@ -9,11 +9,11 @@ import pytest
 
 from autograder.engine.assignment import (
     Assignment,
-    Rules,
     checks_digest,
     list_assignments,
     load_assignment,
 )
+from autograder.engine.forbidden import Rules
 from autograder.errors import AssignmentError, UsageError
 
 TOML = """\

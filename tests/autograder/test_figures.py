@@ -21,7 +21,9 @@ import matplotlib.tri as mtri  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 
-from autograder.boundary.protocol import Unsupported, decode, encode, recv_message, send_message  # noqa: E402
+from autograder.boundary.codec import decode, encode  # noqa: E402
+from autograder.boundary.frames import recv_message, send_message  # noqa: E402
+from autograder.boundary.values import Unsupported  # noqa: E402
 from autograder.worker.figures import (  # noqa: E402
     close_all,
     figure_to_data,
@@ -296,7 +298,7 @@ def test_decoding_figure_data_needs_no_matplotlib(tmp_path):
 import json, sys
 from pathlib import Path
 sys.modules["matplotlib"] = None  # any matplotlib import now fails
-from autograder.boundary.protocol import decode
+from autograder.boundary.codec import decode
 d = Path({str(tmp_path)!r})
 tree = json.loads((d / "tree.json").read_text())
 data = decode(tree, [(d / f"{{i}}.bin").read_bytes() for i in range({len(buffers)})])
@@ -311,4 +313,4 @@ print("ok")
 def test_figures_module_imports_nothing_else_from_autograder():
     source = Path(figures.__file__).read_text()
     imports = [line for line in source.splitlines() if line.startswith(("import autograder", "from autograder"))]
-    assert all(line.startswith("from autograder.boundary.protocol") or "protocol" in line for line in imports)
+    assert all(line.startswith("from autograder.boundary.") for line in imports)

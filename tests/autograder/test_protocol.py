@@ -1,4 +1,4 @@
-"""Tests of autograder.boundary.protocol: round-trips, hostile values, forged trees, frames."""
+"""Tests of the boundary (codec, frames, values, limits): round-trips, hostile values, forged trees, frames."""
 
 from __future__ import annotations
 
@@ -20,19 +20,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from autograder.boundary import protocol
-from autograder.boundary.protocol import (
-    MAX_DEPTH,
-    MAX_STR_CHARS,
-    Unsupported,
-    decode,
-    encode,
-    encode_result,
-    recv_frame,
-    recv_message,
-    send_frame,
-    send_message,
-)
+from autograder.boundary import codec, frames, limits, values
+from autograder.boundary.codec import MAX_STR_CHARS, decode, encode, encode_result
+from autograder.boundary.frames import recv_frame, recv_message, send_frame, send_message
+from autograder.boundary.limits import MAX_DEPTH
+from autograder.boundary.values import CallableRef, Unsupported, replace_refs
 from autograder.errors import ProtocolError
 
 MiB = 2**20
@@ -861,11 +853,12 @@ def test_send_frame_rejects_a_non_json_tree(pair):
 
 
 # --------------------------------------------------------------------------
-# the module itself
+# the modules themselves
 
 
-def test_protocol_imports_only_stdlib_numpy_and_errors():
-    source = Path(protocol.__file__).read_text()
+@pytest.mark.parametrize("module", [codec, frames, limits, values], ids=lambda m: m.__name__)
+def test_boundary_imports_only_stdlib_numpy_and_errors(module):
+    source = Path(module.__file__).read_text()
     tree = ast.parse(source)
     imported = set()
     for node in ast.walk(tree):
@@ -885,13 +878,13 @@ def test_protocol_imports_only_stdlib_numpy_and_errors():
 
 
 def test_callable_ref_round_trips_as_plain_data():
-    ref = protocol.CallableRef("g1", "f", "numpy.sin")
-    tree, buffers = encode([ref, {"k": protocol.CallableRef("7.2")}])
+    ref = CallableRef("g1", "f", "numpy.sin")
+    tree, buffers = encode([ref, {"k": CallableRef("7.2")}])
     assert tree[0] == {"$t": "fn", "id": "g1", "name": "f", "safe": "numpy.sin"}
     assert tree[1]["k"] == {"$t": "fn", "id": "7.2", "name": "f"}
     got = decode(tree, buffers)
-    assert got == [ref, {"k": protocol.CallableRef("7.2", "f", "")}]
-    assert type(got[0]) is protocol.CallableRef
+    assert got == [ref, {"k": CallableRef("7.2", "f", "")}]
+    assert type(got[0]) is CallableRef
 
 
 def test_callables_stay_unsupported_without_a_callable_encoder():
@@ -904,7 +897,7 @@ def test_callable_encoder_turns_callables_into_refs_and_never_pickles():
 
     def export(value):
         seen.append(value)
-        return protocol.CallableRef(f"9.{len(seen)}", "function")
+        return CallableRef(f"9.{len(seen)}", "function")
 
     def student_function(x):
         return x
@@ -939,15 +932,15 @@ def test_forged_function_refs_are_rejected(node):
 
 
 def test_replace_refs_walks_decoded_containers_only():
-    ref = protocol.CallableRef("g1")
+    ref = CallableRef("g1")
     value = {"a": [1, (ref, 2.0)], "b": np.zeros(2)}
-    out = protocol.replace_refs(value, lambda r: f"stub-{r.id}")
+    out = replace_refs(value, lambda r: f"stub-{r.id}")
     assert out["a"] == [1, ("stub-g1", 2.0)] and out["b"] is value["b"]
     plain = [1, [2, 3], {"x": 4}]
-    assert protocol.replace_refs(plain, lambda r: None) is plain
+    assert replace_refs(plain, lambda r: None) is plain
 
 
 def test_safe_functions_are_numpy_ufuncs():
-    for name in protocol.SAFE_FUNCTIONS:
+    for name in values.SAFE_FUNCTIONS:
         module, attr = name.split(".")
         assert module == "numpy" and isinstance(getattr(np, attr), np.ufunc), name

@@ -6,7 +6,8 @@ import ast
 
 import pytest
 
-from autograder.engine.staticscan import ScanFindings, Use, scan
+from autograder.engine.scanfindings import ScanFindings, Use
+from autograder.engine.staticscan import scan
 from autograder.errors import UsageError
 
 SPATIAL = ["scipy.spatial"]

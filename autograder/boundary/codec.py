@@ -1,9 +1,12 @@
-"""Plain-data encoding and framing at the boundary between grader and worker.
+"""Plain-data encoding of values at the boundary between grader and worker.
 
-This module is imported by both sides: the trusted grader and the untrusted
-worker that runs student code. It therefore imports only the standard library,
-numpy and :mod:`autograder.errors`, and it never imports :mod:`pickle`, never
-calls ``eval``, and never calls a constructor chosen by the data.
+A value becomes a JSON tree and a list of buffers (:func:`encode`), and a tree
+and its buffers become a value again (:func:`decode`); :mod:`autograder.boundary.frames`
+carries them over a socket. This module is imported by both sides: the trusted
+grader and the untrusted worker that runs student code. It therefore imports
+only the standard library, numpy and :mod:`autograder.errors` (and the
+boundary's own limits), and it never imports :mod:`pickle`, never calls
+``eval``, and never calls a constructor chosen by the data.
 
 Why hand-written
 ----------------
@@ -41,15 +44,18 @@ key sets) stand for everything else:
     plain dict that keeps ``"$t": "figure"``, so it equals what the same figure
     data gives when sent as an ordinary (escaped) dict.
 ``{"$t": "unsupported", "type": str, "repr": str, "reason": str}``
-    a value that could not be encoded; decoded to :class:`Unsupported`.
+    a value that could not be encoded; decoded to
+    :class:`~autograder.boundary.values.Unsupported`.
 ``{"$t": "fn", "id": str, "name": str, "safe": str}``
     a reference to a function that stays on the side that sent it (``safe``
     optional): a function a check passes to student code, or one the student
-    returns. Decoded to :class:`CallableRef`, plain data; each side turns refs
-    into its own calling objects (:mod:`autograder.engine.callbacks` on the trusted
-    side, :mod:`autograder.worker.loop` in the worker), so no function's
-    code ever crosses. ``safe`` names a function of :data:`SAFE_FUNCTIONS`
-    that the worker may evaluate itself.
+    returns. Decoded to :class:`~autograder.boundary.values.CallableRef`, plain
+    data; each side turns refs into its own calling objects
+    (:mod:`autograder.engine.callbacks` on the trusted side,
+    :mod:`autograder.worker.loop` in the worker), so no function's code ever
+    crosses. ``safe`` names a function of
+    :data:`~autograder.boundary.values.SAFE_FUNCTIONS` that the worker may
+    evaluate itself.
 
 Every buffer must be referenced exactly once. Depth counts nested containers
 (list, tuple, dict, figure); items count every value node.
@@ -57,69 +63,35 @@ Every buffer must be referenced exactly once. Depth counts nested containers
 Trees compose: a plain dict with str keys (no ``"$t"``) whose values are trees
 is a tree, so the worker can wrap the tree from :func:`encode_result` in a
 JSON envelope, e.g. ``{"status": "ok", "value": tree}``, and send it with
-:func:`send_frame`. :func:`encode_result` leaves room for such an envelope in
-its default limits.
-
-Frame
------
-``>I`` length of the header, the UTF-8 (in fact ASCII) JSON header
-``{"v": tree, "bufs": [len0, len1, ...]}``, then for each buffer its ``>Q``
-length and its bytes. The lengths are in the header *and* before each buffer:
-the header copy lets the receiver check the frame's total size against
-``max_bytes`` before reading any payload; the prefixes must agree with it.
-
-Errors on receiving: :class:`~autograder.errors.ProtocolError` for a
-malformed or oversized frame, :class:`EOFError` when the peer closed the
-connection (before or inside a frame), :class:`TimeoutError` when ``timeout``
-ran out. After any of these the stream is out of step: close the connection.
+:func:`~autograder.boundary.frames.send_frame`. :func:`encode_result` leaves
+room for such an envelope in its default limits. The limits themselves are in
+:mod:`autograder.boundary.limits`.
 """
 
 from __future__ import annotations
 
 import builtins
-import collections
-import dataclasses
-import json
 import math
 import re
 import reprlib
-import socket
-import struct
-import time
 from collections.abc import Callable, Sequence, Set
 from typing import Any
 
 import numpy as np
 
+from autograder.boundary.limits import BUFFER_PREFIX, MAX_DEPTH, MAX_FRAME_BYTES, MAX_ITEMS
+from autograder.boundary.values import SAFE_FUNCTIONS, CallableRef, Unsupported
 from autograder.errors import ProtocolError
 
 __all__ = [
-    "ProtocolError",
-    "MAX_FRAME_BYTES",
-    "MAX_DEPTH",
-    "MAX_ITEMS",
     "MAX_STR_CHARS",
     "MAX_INT_DIGITS",
     "MAX_NDIM",
-    "Unsupported",
-    "CallableRef",
-    "SAFE_FUNCTIONS",
-    "replace_refs",
     "encode",
     "encode_result",
     "decode",
-    "send_frame",
-    "recv_frame",
-    "send_message",
-    "recv_message",
 ]
 
-#: Largest frame (length prefix, header, buffers and their prefixes) in bytes.
-MAX_FRAME_BYTES = 64 * 2**20
-#: Deepest nesting of containers (list, tuple, dict, figure) in a value.
-MAX_DEPTH = 32
-#: Most value nodes in one tree.
-MAX_ITEMS = 1_000_000
 #: Longest str (values, dict keys) in characters.
 MAX_STR_CHARS = 1_000_000
 #: Largest int, in decimal digits (approximately: the check is on bits).
@@ -138,18 +110,15 @@ FigureEncoder = Callable[[object], dict]
 CallableEncoder = Callable[[object], "CallableRef | None"]
 
 _JSON_INT_BITS = 1024  # larger ints use the "int" tag
-_JSON_INT_CHARS = 320  # a 1024-bit int has 309 digits; longer JSON numbers are rejected
 _MAX_INT_BITS = math.ceil(MAX_INT_DIGITS * math.log2(10))
 _MAX_HEX_CHARS = _MAX_INT_BITS // 4 + 4
 _MAX_REPR_CHARS = 300
-_COALESCE_BYTES = 64 * 1024
 _DTYPE_RE = re.compile(r"[<>|=][biufc](1|2|4|8|16|32)")
 _HEX_RE = re.compile(r"-?0x[0-9a-f]+")
 _DTYPE_RULE = "only bool, int, uint, float and complex dtypes can cross"
 _CAUGHT = (Exception, SystemExit, GeneratorExit)  # what student code may raise while encoding
 _NONFINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
-_HEADER_LEN = struct.Struct(">I")
-_BUF_LEN = struct.Struct(">Q")
+_REF_ID_RE = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
 
 # Exact numpy scalar types that cross as Python scalars, with their converter.
 _PYTHON_SCALAR = {"b": bool, "i": int, "u": int, "f": float, "c": complex}
@@ -174,67 +143,6 @@ class _Repr(reprlib.Repr):
 _REPR = _Repr()
 _REPR.maxstring = _REPR.maxother = _MAX_REPR_CHARS // 2
 _REPR.maxlevel = 3
-
-
-@dataclasses.dataclass(frozen=True, slots=True)
-class Unsupported:
-    """A value the worker could not encode, as it arrives on the trusted side.
-
-    ``type`` is the qualified type name, ``repr`` a short (reprlib-limited)
-    repr, ``reason`` why it could not cross. The proxy turns it into
-    :class:`~autograder.errors.UnsupportedValue`.
-    """
-
-    type: str
-    repr: str
-    reason: str = ""
-
-
-#: Functions a check may let the worker evaluate itself, by name (pure, elementwise numpy
-#: ufuncs: no state, no I/O, no callbacks). The worker resolves each name in numpy itself.
-SAFE_FUNCTIONS = frozenset(f"numpy.{name}" for name in (
-    "sin", "cos", "tan", "arcsin", "arccos", "arctan", "sinh", "cosh", "tanh", "arcsinh",
-    "arccosh", "arctanh", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "sqrt",
-    "cbrt", "square", "absolute", "abs", "sign", "reciprocal", "floor", "ceil", "rint",
-    "negative", "positive", "deg2rad", "rad2deg",
-))
-_REF_ID_RE = re.compile(r"[A-Za-z0-9_.:-]{1,64}")
-
-
-@dataclasses.dataclass(frozen=True, slots=True)
-class CallableRef:
-    """A function that stays on the side that sent it, as plain data.
-
-    ``id`` identifies it to its owner (the grader's callback registry, or the
-    worker's table of returned functions), ``name`` is for messages only and
-    ``safe`` (a name in :data:`SAFE_FUNCTIONS`, or ``""``) lets the worker
-    evaluate the function itself.
-    """
-
-    id: str
-    name: str = "f"
-    safe: str = ""
-
-
-def replace_refs(value: object, make: Callable[[CallableRef], object], _depth: int = 0) -> object:
-    """``value`` with every :class:`CallableRef` in it replaced by ``make(ref)``.
-
-    Walks only the exact containers :func:`decode` builds (list, tuple, dict);
-    containers holding no ref are returned as they are, not copied.
-    """
-    t = type(value)
-    if t is CallableRef:
-        return make(value)  # type: ignore[arg-type]
-    if _depth > MAX_DEPTH or t not in (list, tuple, dict):
-        return value
-    if t is dict:
-        items = value.items()  # type: ignore[attr-defined]
-        new = {k: replace_refs(v, make, _depth + 1) for k, v in items}
-        return value if all(new[k] is v for k, v in items) else new
-    new_items = [replace_refs(v, make, _depth + 1) for v in value]  # type: ignore[attr-defined]
-    if all(a is b for a, b in zip(new_items, value)):  # type: ignore[call-overload]
-        return value
-    return new_items if t is list else tuple(new_items)
 
 
 # --------------------------------------------------------------------------
@@ -311,10 +219,11 @@ def encode_result(
     except _CAUGHT as exc:  # defensive: encode does not raise these
         del bufs[start:]
         return _unsupported(value, f"encoding failed with {_type_name(type(exc))}"), bufs
-    size = sum(_BUF_LEN.size + _nbytes(b) for b in bufs[start:])
+    size = sum(BUFFER_PREFIX.size + nbytes(b) for b in bufs[start:])
     if size > max_bytes:
         del bufs[start:]
-        reason = f"value needs {_size(size)}, more than the {_size(max_bytes)} limit for a result"
+        limit = size_text(max_bytes)
+        reason = f"value needs {size_text(size)}, more than the {limit} limit for a result"
         return _unsupported(value, reason), bufs
     return tree, bufs
 
@@ -422,7 +331,8 @@ class _Encoder:
         if x.ndim > MAX_NDIM:
             return _unsupported(x, f"arrays of more than {MAX_NDIM} dimensions cannot cross")
         if x.nbytes > MAX_FRAME_BYTES:  # before copying: a broadcast view can be huge
-            reason = f"array of {_size(x.nbytes)} exceeds the {_size(MAX_FRAME_BYTES)} frame limit"
+            limit = size_text(MAX_FRAME_BYTES)
+            reason = f"array of {size_text(x.nbytes)} exceeds the {limit} frame limit"
             return _unsupported(x, reason)
         contiguous = x if x.flags.c_contiguous else x.copy(order="C")
         data = memoryview(contiguous.reshape(-1).view(np.uint8))
@@ -638,7 +548,7 @@ class _Decoder:
             handler = self.handlers.get(tag) if type(tag) is str else None
             if handler is None:
                 known = sorted(self.handlers)
-                raise ProtocolError(f"unknown tag {_short(tag)}; expected one of {known}")
+                raise ProtocolError(f"unknown tag {short_repr(tag)}; expected one of {known}")
             return handler(node, depth)
         raise ProtocolError(f"tree node of type {_type_name(t)} is not JSON")
 
@@ -657,7 +567,7 @@ class _Decoder:
         _expect_keys(node, {"v"})
         v = node["v"]
         if type(v) is not str or v not in _NONFINITE:
-            raise ProtocolError(f"'float' tag needs v in {sorted(_NONFINITE)}; got {_short(v)}")
+            raise ProtocolError(f"'float' tag needs v in {sorted(_NONFINITE)}; got {short_repr(v)}")
         return _NONFINITE[v]
 
     def _int(self, node: dict, depth: int) -> int:
@@ -693,7 +603,7 @@ class _Decoder:
                 raise ProtocolError("'dict' items must be [key, value] pairs with str keys")
             key = _check_key(pair[0])
             if key in out:
-                raise ProtocolError(f"'dict' has the key {_short(key)} twice")
+                raise ProtocolError(f"'dict' has the key {short_repr(key)} twice")
             out[key] = self.decode(pair[1], depth + 1)
         return out
 
@@ -748,13 +658,13 @@ class _Decoder:
         if type(name) is not str or len(name) > _MAX_REPR_CHARS:
             raise ProtocolError(f"'fn' name must be a str of at most {_MAX_REPR_CHARS} characters")
         if type(safe) is not str or (safe and safe not in SAFE_FUNCTIONS):
-            raise ProtocolError(f"'fn' safe name {_short(safe)} is not one of SAFE_FUNCTIONS")
+            raise ProtocolError(f"'fn' safe name {short_repr(safe)} is not one of SAFE_FUNCTIONS")
         return CallableRef(ref_id, name, safe)
 
     def _take(self, index: object) -> memoryview:
         if type(index) is not int or not 0 <= index < len(self.buffers):
             n = len(self.buffers)
-            raise ProtocolError(f"buffer index {_short(index)} is not one of the {n} buffers")
+            raise ProtocolError(f"buffer index {short_repr(index)} is not one of the {n} buffers")
         if self.used[index]:
             raise ProtocolError(f"buffer {index} is referenced twice")
         self.used[index] = True
@@ -772,7 +682,7 @@ def _expect_keys(node: dict, required: set[str], *, optional: Set[str] = frozens
     if not required <= keys or not keys <= required | optional:
         tag = node["$t"]
         want = sorted(required | optional)
-        raise ProtocolError(f"tag {tag!r} needs keys {want}; got {sorted(map(_short, keys))}")
+        raise ProtocolError(f"tag {tag!r} needs keys {want}; got {sorted(map(short_repr, keys))}")
 
 
 def _float_part(v: object, name: str) -> float:
@@ -780,12 +690,13 @@ def _float_part(v: object, name: str) -> float:
         return v
     if type(v) is dict and set(v) == {"$t", "v"} and v["$t"] == "float" and v["v"] in _NONFINITE:
         return _NONFINITE[v["v"]]
-    raise ProtocolError(f"'complex' part {name!r} must be a float or 'float' tag; got {_short(v)}")
+    raise ProtocolError(
+        f"'complex' part {name!r} must be a float or 'float' tag; got {short_repr(v)}")
 
 
 def _check_dtype(s: object) -> np.dtype:
     if type(s) is not str or not _DTYPE_RE.fullmatch(s):
-        raise ProtocolError(f"array dtype {_short(s)} is not allowed; {_DTYPE_RULE}")
+        raise ProtocolError(f"array dtype {short_repr(s)} is not allowed; {_DTYPE_RULE}")
     try:
         dtype = np.dtype(s)
     except TypeError:
@@ -810,7 +721,8 @@ def _check_shape(shape: object) -> list[int]:
         raise ProtocolError(f"array shape must be a list of at most {MAX_NDIM} ints")
     for n in shape:
         if type(n) is not int or n < 0:
-            raise ProtocolError(f"array shape entries must be non-negative ints; got {_short(n)}")
+            raise ProtocolError(
+                f"array shape entries must be non-negative ints; got {short_repr(n)}")
     return shape
 
 
@@ -822,216 +734,23 @@ def _check_str(s: str, what: str) -> str:
 
 def _check_key(k: object) -> str:
     if type(k) is not str:
-        raise ProtocolError(f"dict key {_short(k)} is not a str")
+        raise ProtocolError(f"dict key {short_repr(k)} is not a str")
     return _check_str(k, "dict key")
 
 
-def _short(x: object) -> str:
+def short_repr(x: object) -> str:
     """A short repr of tree data (plain JSON types only) for error messages."""
     text = repr(x) if type(x) in (str, int, float, bool, type(None)) else f"<{_type_name(type(x))}>"
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-# --------------------------------------------------------------------------
-# framing
-
-
-def send_frame(
-    sock: socket.socket,
-    tree: Tree,
-    buffers: Sequence[Buffer],
-    *,
-    max_bytes: int = MAX_FRAME_BYTES,
-) -> int:
-    """Send one frame holding ``tree`` and ``buffers``; return its size in bytes.
-
-    Raises :class:`ProtocolError` before sending anything if the tree is not
-    plain JSON or the frame would exceed ``max_bytes``; socket errors
-    (``OSError``, ``TimeoutError`` from the socket's own timeout) propagate.
-    """
-    lengths = [_nbytes(b) for b in buffers]
-    try:
-        text = json.dumps({"v": tree, "bufs": lengths}, allow_nan=False, separators=(",", ":"))
-    except (TypeError, ValueError, RecursionError) as exc:
-        raise ProtocolError(f"tree is not plain JSON: {exc}") from None
-    header = text.encode("ascii")  # ensure_ascii: lone surrogates are escaped, not lost
-    total = _HEADER_LEN.size + len(header) + sum(_BUF_LEN.size + n for n in lengths)
-    if total > max_bytes:
-        raise ProtocolError(f"frame of {_size(total)} exceeds the {_size(max_bytes)} limit")
-    pending = bytearray(_HEADER_LEN.pack(len(header)))
-    pending += header
-    for data, n in zip(buffers, lengths):
-        pending += _BUF_LEN.pack(n)
-        if n <= _COALESCE_BYTES:
-            pending += data
-        else:
-            sock.sendall(pending)
-            pending = bytearray()
-            sock.sendall(data)
-    if pending:
-        sock.sendall(pending)
-    return total
-
-
-def recv_frame(
-    sock: socket.socket, *, max_bytes: int = MAX_FRAME_BYTES, timeout: float | None = None
-) -> tuple[Tree, list[bytearray]]:
-    """Receive one frame; return ``(tree, buffers)`` (tree parsed, not yet decoded).
-
-    ``timeout`` is a deadline in seconds for the whole frame (``None``: leave
-    the socket's own timeout as it is). Raises :class:`ProtocolError` for a
-    malformed frame or one larger than ``max_bytes`` (checked from the header,
-    before any payload is read), :class:`EOFError` if the peer closed the
-    connection, :class:`TimeoutError` when the deadline passes.
-    """
-    deadline = None if timeout is None else time.monotonic() + timeout
-    previous = sock.gettimeout()
-    # The socket's timeout is changed only when a read has to wait for the deadline
-    # (see _recv_exactly), and put back only then; a socket that has a timeout of its
-    # own is read as before (its reads wait in poll, so they cannot be tried at once).
-    waited = [deadline is not None and previous is not None]
-    try:
-        raw = _recv_exactly(sock, _HEADER_LEN.size, deadline, "frame length", waited)
-        (header_len,) = _HEADER_LEN.unpack(raw)
-        if _HEADER_LEN.size + header_len > max_bytes:
-            limit = _size(max_bytes)
-            raise ProtocolError(f"frame header of {_size(header_len)} exceeds the {limit} limit")
-        tree, lengths = _parse_header(_recv_exactly(sock, header_len, deadline, "frame header",
-                                                    waited))
-        total = _HEADER_LEN.size + header_len + sum(_BUF_LEN.size + n for n in lengths)
-        if total > max_bytes:
-            raise ProtocolError(f"frame of {_size(total)} exceeds the {_size(max_bytes)} limit")
-        buffers = []
-        for i, n in enumerate(lengths):
-            raw = _recv_exactly(sock, _BUF_LEN.size, deadline, f"length of buffer {i}", waited)
-            (announced,) = _BUF_LEN.unpack(raw)
-            if announced != n:
-                raise ProtocolError(
-                    f"buffer {i} is {n} bytes in the header but {announced} in its prefix"
-                )
-            buffers.append(_recv_exactly(sock, n, deadline, f"buffer {i}", waited))
-        return tree, buffers
-    finally:
-        if waited[0]:
-            sock.settimeout(previous)
-
-
-def send_message(
-    sock: socket.socket,
-    obj: object,
-    *,
-    figure_encoder: FigureEncoder | None = None,
-    max_depth: int = MAX_DEPTH,
-    max_items: int = MAX_ITEMS,
-    max_bytes: int = MAX_FRAME_BYTES,
-    callable_encoder: CallableEncoder | None = None,
-) -> int:
-    """Encode ``obj`` (see :func:`encode`) and send it as one frame; return the frame size.
-
-    Raises :class:`ProtocolError` before sending anything if ``obj`` is over a
-    limit.
-    """
-    tree, buffers = encode(
-        obj, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder,
-        callable_encoder=callable_encoder,
-    )
-    return send_frame(sock, tree, buffers, max_bytes=max_bytes)
-
-
-def recv_message(
-    sock: socket.socket,
-    *,
-    max_bytes: int = MAX_FRAME_BYTES,
-    timeout: float | None = None,
-    max_depth: int = MAX_DEPTH,
-    max_items: int = MAX_ITEMS,
-) -> object:
-    """Receive one frame and decode it (see :func:`recv_frame` and :func:`decode`)."""
-    tree, buffers = recv_frame(sock, max_bytes=max_bytes, timeout=timeout)
-    return decode(tree, buffers, max_depth=max_depth, max_items=max_items)
-
-
-def _recv_exactly(sock: socket.socket, n: int, deadline: float | None, what: str,
-                  waited: list[bool]) -> bytearray:
-    buf = bytearray(n)
-    view = memoryview(buf)
-    got = 0
-    if deadline is not None and n and not waited[0]:
-        # The peer writes a frame with one send, so its bytes are usually here already:
-        # take them without a deadline. Setting the socket's timeout for the read (one
-        # ioctl each way, and a poll before every read) cost more than the read itself.
-        try:
-            got = sock.recv_into(view, n, socket.MSG_DONTWAIT)
-        except (BlockingIOError, InterruptedError):
-            got = 0
-        else:
-            if got == 0:
-                raise EOFError(f"connection closed after 0 of {n} bytes of the {what}")
-    while got < n:
-        if deadline is not None:
-            waited[0] = True
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise TimeoutError(f"timed out waiting for the {what} ({got} of {n} bytes read)")
-            sock.settimeout(remaining)
-        k = sock.recv_into(view[got:])
-        if k == 0:
-            raise EOFError(f"connection closed after {got} of {n} bytes of the {what}")
-        got += k
-    return buf
-
-
-def _parse_header(raw: bytearray) -> tuple[Tree, list[int]]:
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ProtocolError("frame header is not UTF-8") from None
-    try:
-        header = json.loads(
-            text,
-            parse_constant=_reject_constant,
-            parse_int=_parse_int,
-            object_pairs_hook=_unique_keys,
-        )
-    except RecursionError:
-        raise ProtocolError("frame header is nested too deeply") from None
-    except ValueError as exc:
-        raise ProtocolError(f"frame header is not valid JSON: {exc}") from None
-    if type(header) is not dict or set(header) != {"v", "bufs"}:
-        raise ProtocolError("frame header must be a JSON object with keys 'v' and 'bufs'")
-    lengths = header["bufs"]
-    if type(lengths) is not list or len(lengths) > MAX_ITEMS:
-        raise ProtocolError(f"'bufs' must be a list of at most {MAX_ITEMS} lengths")
-    for n in lengths:
-        if type(n) is not int or n < 0:
-            raise ProtocolError(f"buffer lengths must be non-negative ints; got {_short(n)}")
-    return header["v"], lengths
-
-
-def _reject_constant(name: str) -> float:
-    raise ProtocolError(f"frame header contains {name}; non-finite floats must use the 'float' tag")
-
-
-def _parse_int(s: str) -> int:
-    if len(s) > _JSON_INT_CHARS:
-        raise ProtocolError(f"JSON int of {len(s)} digits; ints over 1024 bits use the 'int' tag")
-    return int(s)
-
-
-def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
-    out = dict(pairs)
-    if len(out) != len(pairs):
-        counts = collections.Counter(k for k, _ in pairs)
-        duplicate = next(k for k, n in counts.items() if n > 1)
-        raise ProtocolError(f"frame header has the key {_short(duplicate)} twice in one object")
-    return out
-
-
-def _nbytes(data: Buffer) -> int:
+def nbytes(data: Buffer) -> int:
+    """The length of a buffer in bytes."""
     return len(data) if type(data) in (bytes, bytearray) else memoryview(data).nbytes
 
 
-def _size(n: int) -> str:
+def size_text(n: int) -> str:
+    """A size for messages: ``"12 bytes"``, ``"1.5 KiB"``, ``"64 MiB"``."""
     if n >= 2**20:
         return f"{n / 2**20:.1f}".removesuffix(".0") + " MiB"
     if n >= 2**10:
