@@ -35,13 +35,13 @@ def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, o
           progress: bool | None = None,
           on_result: Callable[[SubmissionResult], None] | None = None,
           junit: Path | None = None, dask: DaskSpec | str | None = None,
-          shard: Shard | str | None = None, worker: GradingSlot | None = None) -> BatchRun:
+          shard: Shard | str | None = None, started_slot: GradingSlot | None = None) -> BatchRun:
     """Grade notebooks (files or folders) into ``out``; see :func:`autograder.runners.batch.grade_batch`.
 
     ``junit``, when given, is a file for the JUnit XML report of every result in
     ``out``. ``dask`` (a :class:`DaskSpec`, or an address such as ``"local:2"``)
     grades on a Dask cluster instead of ``jobs`` local processes; ``shard``
-    (``"K/N"``) grades only that share of the submissions. ``worker``, a slot from
+    (``"K/N"``) grades only that share of the submissions. ``started_slot``, a slot from
     :func:`autograder.engine.slot.start_early`, is the first local slot; the caller closes
     it after the call (the command line starts it before importing the engine).
     """
@@ -50,7 +50,7 @@ def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, o
                          jobs=jobs, options=options, progress=progress, on_result=on_result,
                          dask=DaskSpec(dask) if isinstance(dask, str) else dask,
                          shard=Shard.parse(shard) if isinstance(shard, str) else shard,
-                         worker=worker)
+                         started_slot=started_slot)
     if junit is not None:
         exports.write_junit(Path(junit), report.folder, name=found.name)
     return report
@@ -126,26 +126,26 @@ def new(name: str, *, out: Path | None = None, title: str | None = None) -> Path
 
 def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
              jobs: int | None = None, options: GradingOptions | None = None,
-             worker: GradingSlot | None = None) -> "ValidationRun":
+             started_slot: GradingSlot | None = None) -> "ValidationRun":
     """Release ``assignment``, check nothing leaked, grade its examples and the
     released template, and compare each score with its band in
     ``examples/expected.toml`` (see :mod:`autograder.authoring.validate`).
 
     ``work``, when given, keeps the release and the results (feedback pages) there.
-    ``worker``: as for :func:`grade`.
+    ``started_slot``: as for :func:`grade`.
     """
     from autograder.authoring.validate import validate as _validate
 
     return _validate(resolve_assignment(assignment), work=None if work is None else Path(work),
-                     jobs=jobs, options=options, worker=worker)
+                     jobs=jobs, options=options, started_slot=started_slot)
 
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
           options: GradingOptions | None = None,
-          worker: GradingSlot | None = None) -> SubmissionResult:
+          started_slot: GradingSlot | None = None) -> SubmissionResult:
     """Run the public checks on one notebook, as a student does before submitting.
 
-    ``worker``: as for :func:`grade`.
+    ``started_slot``: as for :func:`grade`.
     """
     notebook = Path(notebook)
     found = resolve_assignment(assignment) if assignment is not None else _guess(notebook)
@@ -153,7 +153,7 @@ def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
     opts = GradingOptions(policy=base.policy, notebook_timeout=base.notebook_timeout,
                           call_timeout=base.call_timeout, public_only=True,
                           max_notebook_bytes=base.max_notebook_bytes)
-    with Grader(found, opts, worker=worker) as grader:
+    with Grader(found, opts, started_slot=started_slot) as grader:
         return grader.grade(notebook)
 
 

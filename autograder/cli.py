@@ -227,7 +227,7 @@ def _options(args: argparse.Namespace) -> GradingOptions:
                           public_only=getattr(args, "public_only", False))
 
 
-def _worker_started_early(wanted: bool) -> contextlib.AbstractContextManager[GradingSlot | None]:
+def _slot_started_early(wanted: bool) -> contextlib.AbstractContextManager[GradingSlot | None]:
     """A warm parent started before the engine's imports (see ``slot.start_early``);
     the slot's own context shuts it down at the end of the command."""
     if not wanted:
@@ -238,7 +238,7 @@ def _worker_started_early(wanted: bool) -> contextlib.AbstractContextManager[Gra
 
 
 def _grade(args: argparse.Namespace) -> int:
-    with _worker_started_early(args.dask is None) as worker:
+    with _slot_started_early(args.dask is None) as started_slot:
         from autograder import api
 
         quiet = args.no_progress or args.ci
@@ -248,7 +248,7 @@ def _grade(args: argparse.Namespace) -> int:
         report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
                            options=_options(args), progress=False if quiet else None,
                            dask=_dask(args), shard=args.shard,
-                           junit=args.junit, worker=worker)
+                           junit=args.junit, started_slot=started_slot)
     if args.ci:
         summary_file = os.environ.get("GITHUB_STEP_SUMMARY") or None
         for line in api.ci_report(report, step_summary=Path(summary_file) if summary_file else None):
@@ -290,11 +290,11 @@ def format_check(result: SubmissionResult) -> str:
 
 
 def _check(args: argparse.Namespace) -> int:
-    with _worker_started_early(True) as worker:
+    with _slot_started_early(True) as started_slot:
         from autograder import api
 
         result = api.check(args.notebook, assignment=args.assignment, options=_options(args),
-                           worker=worker)
+                           started_slot=started_slot)
     print(format_check(result))
     return 0 if result.score >= result.max_score else 1
 
@@ -309,12 +309,12 @@ def _new(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    with _worker_started_early(True) as worker:
+    with _slot_started_early(True) as started_slot:
         from autograder import api
         from autograder.authoring.validate import format_report
 
         report = api.validate(args.assignment, work=args.work, jobs=args.jobs,
-                              options=_options(args), worker=worker)
+                              options=_options(args), started_slot=started_slot)
     print(format_report(report))
     return 0 if report.ok else 1
 

@@ -90,7 +90,7 @@ class ValidationRun:
 
 def validate(assignment: Assignment, *, work: Path | None = None, jobs: int | None = None,
              options: GradingOptions | None = None,
-             worker: GradingSlot | None = None) -> ValidationRun:
+             started_slot: GradingSlot | None = None) -> ValidationRun:
     """Release ``assignment``, look for leaks, grade its examples and check their bands.
 
     Parameters
@@ -103,18 +103,18 @@ def validate(assignment: Assignment, *, work: Path | None = None, jobs: int | No
         Examples graded in parallel (default: the number of cores).
     options : GradingOptions, optional
         As for ``autograder grade``.
-    worker : GradingSlot, optional
+    started_slot : GradingSlot, optional
         A slot started ahead (:func:`autograder.engine.slot.start_early`): the first
         local slot; the caller closes it.
     """
     if work is None:
         with tempfile.TemporaryDirectory(prefix=f"validate-{assignment.name}-") as scratch:
-            return _validate(assignment, Path(scratch), jobs, options, worker)
-    return _validate(assignment, Path(work), jobs, options, worker)
+            return _validate(assignment, Path(scratch), jobs, options, started_slot)
+    return _validate(assignment, Path(work), jobs, options, started_slot)
 
 
 def _validate(assignment: Assignment, work: Path, jobs: int | None,
-              options: GradingOptions | None, worker: GradingSlot | None) -> ValidationRun:
+              options: GradingOptions | None, started_slot: GradingSlot | None) -> ValidationRun:
     bands, problems = _read_bands(assignment)
     released = work / "release"
     try:
@@ -129,7 +129,7 @@ def _validate(assignment: Assignment, work: Path, jobs: int | None,
         shutil.copyfile(path, submissions / path.name)
     shutil.copyfile(template, submissions / f"{TEMPLATE}.ipynb")
     report = grade_batch(assignment, [submissions], work / "results", jobs=jobs,
-                         options=options, progress=False, worker=worker)
+                         options=options, progress=False, started_slot=started_slot)
     results = {r.id: r for r in report.results}
     names = [p.stem for p in examples] + [TEMPLATE]
     for stem in bands:

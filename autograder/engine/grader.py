@@ -1,6 +1,6 @@
 """Grade one submission: the unit of work (one notebook in, one result out).
 
-:class:`Grader` keeps a warm worker slot and the imported checks between
+:class:`Grader` keeps a grading slot and the imported checks between
 submissions, so a batch engine (ours in :mod:`autograder.runners.batch`, or a
 distributed one later) only has to call :meth:`Grader.grade` per file.
 """
@@ -167,12 +167,12 @@ class _Unreadable:
 
 
 class Grader:
-    """Grades submissions of one assignment, one at a time, on one warm worker slot."""
+    """Grades submissions of one assignment, one at a time, on one grading slot."""
 
     def __init__(self, assignment: Assignment, options: GradingOptions | None = None,
                  *, slot: int = 0, scratch: Path | None = None,
-                 worker: GradingSlot | None = None) -> None:
-        """``worker``: a slot whose warm parent was started ahead (see
+                 started_slot: GradingSlot | None = None) -> None:
+        """``started_slot``: a slot whose warm parent was started ahead (see
         :func:`autograder.engine.slot.start_early`), used instead of claiming ``slot``;
         the grader closes it with itself."""
         self.assignment = assignment
@@ -183,7 +183,7 @@ class Grader:
         #: assignment digest they were collected at (a new session when it changes)
         self._checks: CheckSuite | None = None
         self._checks_digest = ""
-        self._slot = worker if worker is not None else GradingSlot(slot=slot, scratch=scratch)
+        self._slot = started_slot if started_slot is not None else GradingSlot(slot=slot, scratch=scratch)
 
     def __enter__(self) -> "Grader":
         return self

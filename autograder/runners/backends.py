@@ -30,16 +30,16 @@ def load_dask_backend() -> ModuleType:
 
 
 def make_backend(*, jobs: int | None = None, dask: DaskSpec | None = None,
-                 worker: GradingSlot | None = None) -> Backend:
+                 started_slot: GradingSlot | None = None) -> Backend:
     """The local pool, or the Dask backend when ``dask`` is given (imports ``distributed``).
 
-    ``worker``, a slot started ahead, becomes the local pool's slot 0.
+    ``started_slot``, a slot started ahead, becomes the local pool's slot 0.
     """
     if dask is not None:
         return load_dask_backend().DaskBackend(dask)
     from autograder.runners.local import LocalBackend
 
-    return LocalBackend(jobs, worker=worker)
+    return LocalBackend(jobs, started_slot=started_slot)
 
 
 __all__ = ["load_dask_backend", "make_backend"]

@@ -213,14 +213,14 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
                 progress: bool | None = None,
                 on_result: Callable[[SubmissionResult], None] | None = None,
                 dask: DaskSpec | None = None, shard: Shard | None = None,
-                worker: GradingSlot | None = None) -> BatchRun:
+                started_slot: GradingSlot | None = None) -> BatchRun:
     """Grade every submission into ``out_dir``, reusing results whose key is unchanged.
 
     Writes ``<id>/results.json`` and ``<id>/feedback.html`` as each submission
     finishes, then ``grades.csv``, ``summary.json`` and ``summary.html`` from
     every result in ``out_dir`` (earlier runs' included). ``dask`` sends the
     gradings to a Dask cluster instead of the local pool of ``jobs`` processes;
-    ``shard`` keeps only the submissions of that shard. ``worker``, a slot started
+    ``shard`` keeps only the submissions of that shard. ``started_slot``, a slot started
     ahead, becomes the local pool's slot 0 (its owner closes it if nothing is graded).
     """
     start = time.perf_counter()
@@ -260,7 +260,7 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
 
     try:
         if todo:
-            make_backend(jobs=jobs, dask=dask, worker=worker).run(assignment, options, todo,
+            make_backend(jobs=jobs, dask=dask, started_slot=started_slot).run(assignment, options, todo,
                                                                   out_dir, finished)
     finally:
         bar.close()

@@ -72,18 +72,18 @@ def _grade_in_slot(path: str, sub_id: str, out_dir: str) -> dict[str, Any]:
 class LocalBackend:
     """``jobs`` slots (default: the number of cores); slot 0 runs in this process.
 
-    ``worker``, a slot whose warm parent was started ahead, is slot 0's.
+    ``started_slot``, a slot whose warm parent was started ahead, is slot 0's.
     """
 
-    def __init__(self, jobs: int | None = None, *, worker: GradingSlot | None = None) -> None:
+    def __init__(self, jobs: int | None = None, *, started_slot: GradingSlot | None = None) -> None:
         self.jobs = jobs
-        self.worker = worker
+        self.started_slot = started_slot
 
     def run(self, assignment: Assignment, options: GradingOptions, jobs: Sequence[Job],
             out_dir: Path, finished: Finished) -> None:
         slots = max(1, min(self.jobs or os.cpu_count() or 1, len(jobs) or 1))
         queue = _Queue(jobs)
-        with Grader(assignment, options, worker=self.worker) as grader:
+        with Grader(assignment, options, started_slot=self.started_slot) as grader:
             grader.prepare()
             if slots == 1:
                 while (job := queue.take()) is not None:
