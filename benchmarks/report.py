@@ -14,6 +14,7 @@ import argparse
 import ast
 import json
 import sys
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -51,8 +52,9 @@ unit. A row that compares with a peer (SciPy, a bare fork, the bare floor, a dir
 call, the code of another commit, nbgrader) gives the peer's figure and the ratio,
 value / peer value; ratios taken in one run move less than the figures themselves,
 and CPU time moves less with the machine's load than wall time. Figures compare
-only within one table: the runs were made at different times, some on a machine
-busy with other work. {load}
+only within one table: the runs were made at different times.
+
+{load}
 
 ## History
 
@@ -96,7 +98,9 @@ def render(runs: list[dict[str, Any]], scripts: Path) -> str:
         parts.append(section(run, summary(known.get(run["name"]))))
     missing = sorted(set(known) - {run["name"] for run in runs})
     if missing:
-        lines = ["## Not measured yet", ""]
+        lines = ["## Not measured yet", "",
+                 "These scripts have no results file yet (a peer such as nbgrader or "
+                 "otter-grader needs an installation of its own, or the run is long):", ""]
         lines += [f"- not measured yet: run `python benchmarks/{name}.py`" for name in missing]
         parts.append("\n".join(lines) + "\n")
     return "\n".join(parts)
@@ -213,11 +217,15 @@ def _load_sentence(runs: list[dict[str, Any]]) -> str:
     busy = sorted({run["name"] for run in runs if _busy(run["machine"])})
     every = [value for load in loads for value in load]
     sentence = (f"These runs saw load averages of {min(every):.2f} to {max(every):.2f} "
-                f"on {' or '.join(str(c) for c in cores)} cores.")
-    if busy:
-        sentence += (" Figures measured at a load average at or above the number of cores "
-                     f"are noisier: {', '.join(f'`{name}`' for name in busy)}.")
-    return sentence
+                f"on {' or '.join(str(c) for c in cores)} cores. Figures measured with a load "
+                "average at or above the number of cores are noisier")
+    if len(busy) == len(runs):
+        sentence += "; here that is every run (the machine was shared with other work)."
+    elif busy:
+        sentence += f": here {', '.join(f'`{name}`' for name in busy)}."
+    else:
+        sentence += "; no run here was."
+    return textwrap.fill(sentence, width=86)
 
 
 def main(argv: list[str] | None = None) -> int:
