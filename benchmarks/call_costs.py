@@ -37,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
 
 import numpy as np  # noqa: E402
+from _record import Figure, add_json_option, record  # noqa: E402
 
 from autograder.sandbox import affinity  # noqa: E402
 
@@ -115,7 +116,8 @@ def measure(args: argparse.Namespace, pinned: bool) -> dict[str, tuple[float, fl
     return found
 
 
-def boundary(args: argparse.Namespace) -> None:
+def boundary(args: argparse.Namespace) -> list[Figure]:
+    """Print the table of CPU per call; return its figures."""
     setting = os.environ.get(affinity.ENVIRONMENT_VARIABLE)
     try:
         pinned, unpinned = measure(args, True), measure(args, False)
@@ -128,6 +130,7 @@ def boundary(args: argparse.Namespace) -> None:
           "grader + worker, the slot on one core (as the engine runs) and unpinned")
     print(f"{'argument':<28} {'direct':>7} {'framed':>7} {'one core':>17} {'unpinned':>17}"
           f" {'unpinned/one core':>18} {'one core/framed':>16}")
+    figures = []
     for label, make in ARGUMENTS.items():
         value = make()
         direct, _ = per_call(args.calls, args.repeat, lambda: same(value))
@@ -136,9 +139,20 @@ def boundary(args: argparse.Namespace) -> None:
         print(f"{label:<28} {direct:>7.2f} {inproc:>7.1f}"
               f" {g1:>5.0f}+{w1:>5.0f}={g1 + w1:>5.0f} {g2:>5.0f}+{w2:>5.0f}={g2 + w2:>5.0f}"
               f" {(g2 + w2) / (g1 + w1):>17.2f}x {(g1 + w1) / inproc:>15.2f}x")
+        figures += [Figure(f"{label}: direct", direct, "us CPU"),
+                    Figure(f"{label}: framed in process", inproc, "us CPU"),
+                    Figure(f"{label}: one core, grader + worker", g1 + w1, "us CPU",
+                           "framed in process", inproc),
+                    Figure(f"{label}: one core, grader", g1, "us CPU"),
+                    Figure(f"{label}: one core, worker", w1, "us CPU"),
+                    Figure(f"{label}: unpinned, grader + worker", g2 + w2, "us CPU",
+                           "one core", g1 + w1),
+                    Figure(f"{label}: unpinned, grader", g2, "us CPU"),
+                    Figure(f"{label}: unpinned, worker", w2, "us CPU")]
+    return figures
 
 
-def hull_calls() -> None:
+def hull_calls() -> list[Figure]:
     """Calls per hull submission, every check and public checks only."""
     from autograder.engine.assignment import load_assignment
     from autograder.engine.grader import Grader, GradingOptions
@@ -153,6 +167,7 @@ def hull_calls() -> None:
         return counted(self, *a, **k)
 
     StudentProcess.call = counting  # type: ignore[method-assign]
+    figures = []
     try:
         for public in (False, True):
             with Grader(load_assignment(hull), GradingOptions(public_only=public)) as grader:
@@ -162,8 +177,11 @@ def hull_calls() -> None:
                 label = "public checks" if public else "every check"
                 print(f"hull, {label}: {calls[0] / len(files):.1f} calls per submission "
                       f"(over its {len(files)} examples)")
+                figures.append(Figure(f"hull, {label}: calls per submission",
+                                      calls[0] / len(files), "calls"))
     finally:
         StudentProcess.call = counted  # type: ignore[method-assign]
+    return figures
 
 
 def main() -> None:
@@ -171,10 +189,15 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=2000)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--no-hull", action="store_true", help="skip counting hull's calls")
+    add_json_option(parser, "call_costs")
     args = parser.parse_args()
-    boundary(args)
+    figures = boundary(args)
     if not args.no_hull:
-        hull_calls()
+        figures += hull_calls()
+    record("call_costs", figures, path=args.json,
+           notes=f"CPU microseconds per call, best of {args.repeat} runs of {args.calls:,} calls; "
+           "grader + worker with the slot on one core (as the engine runs it) and unpinned "
+           "(AUTOGRADER_PIN_CORES=0).")
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ import time
 from typing import Any, Callable
 
 import numpy as np
+from _record import Figure, add_json_option, record
 
 from autograder.engine.callbacks import traced
 from autograder.engine.proxy import CallLog, Student
@@ -61,6 +62,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--scalars", type=int, default=10_000)
     parser.add_argument("--calls", type=int, default=200, help="calls timed for the one-call figures")
+    add_json_option(parser, "callbacks")
     args = parser.parse_args()
     with GradingSlot() as slot:
         session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
@@ -69,12 +71,17 @@ def main() -> None:
         student = Student(session, timeout=120, functions=session.report.functions,
                           forbidden={}, log=CallLog())
         try:
-            report(args, session, student)
+            figures = report(args, session, student)
         finally:
             session.close()
+    record("callbacks", figures, path=args.json,
+           notes=f"Best wall seconds of {args.repeat} runs; {args.calls} calls timed for the "
+           "one-call figures. Student CPU is the worker's own (the grader's time inside "
+           "callbacks is not charged to the student).")
 
 
-def report(args: argparse.Namespace, session: StudentProcess, student: Student) -> None:
+def report(args: argparse.Namespace, session: StudentProcess, student: Student) -> list[Figure]:
+    """Time the calls, print the table and the ratios; return them as figures."""
     k, n = args.calls, args.scalars
     remote, local = traced(np.sin), traced(np.sin, safe=True)
     rows = [
@@ -103,6 +110,19 @@ def report(args: argparse.Namespace, session: StudentProcess, student: Student) 
           f"{(loop_remote - loop_local) / n * 1e6:.0f} us wall, "
           f"{(cpu_remote - cpu_local) / n * 1e6:.0f} us of student CPU")
     assert remote.calls == args.repeat * (k + n) and local.calls == args.repeat * (k + n)
+    figures = []
+    for label, (wall, cpu), count in rows:
+        figures += [Figure(f"{label}: wall", wall / count, "s"),
+                    Figure(f"{label}: student CPU", cpu / count, "s")]
+    return figures + [
+        Figure("one callback round trip", (callback - safe) / k * 1e3, "ms wall"),
+        Figure("call with a callback", callback / k, "s wall", "call with a safe f", safe / k),
+        Figure("call with a callback", callback / k, "s wall", "call without f", plain / k),
+        Figure(f"{n:,} scalars, f by callback", loop_remote, "s wall",
+               "f evaluated in the worker", loop_local),
+        Figure("per scalar callback", (loop_remote - loop_local) / n * 1e6, "us wall"),
+        Figure("per scalar callback", (cpu_remote - cpu_local) / n * 1e6, "us student CPU"),
+    ]
 
 
 if __name__ == "__main__":

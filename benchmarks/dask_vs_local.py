@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import nbformat
+from _record import Figure, add_json_option, record
 from cpu_roles import RoleSampler
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,6 +80,22 @@ def main() -> None:
         print(f"ratio dask/local (rate): {dask['rate'] / local['rate']:.2f}   "
               f"first result: local {local['first']:.1f} s, dask {dask['first']:.1f} s   "
               f"same grades.csv: {same}")
+    record("dask_vs_local", figures(local, dask, same), path=ARGS.json,
+           notes=f"{ARGS.count} hull submissions, {'public' if ARGS.public_only else 'all'} "
+           f"checks, {ARGS.workers} slots each, start-up included.")
+
+
+def figures(local: dict[str, float], dask: dict[str, float], same: bool) -> list[Figure]:
+    """Both runs' figures; Dask's against the local pool's."""
+    units = {"seconds": "s", "rate": "submissions/s", "first": "s to the first result",
+             "failed": "errors"}
+    found = []
+    for key in local:
+        unit = units.get(key, "CPU s per submission")
+        found.append(Figure(f"--jobs {ARGS.workers}: {key}", local[key], unit))
+        found.append(Figure(f"--dask local:{ARGS.workers}: {key}", dask[key], unit,
+                            f"--jobs {ARGS.workers}", local[key]))
+    return found + [Figure("same grades.csv", same, "")]
 
 
 if __name__ == "__main__":  # LocalCluster spawns worker processes that re-import this file
@@ -88,5 +105,6 @@ if __name__ == "__main__":  # LocalCluster spawns worker processes that re-impor
     parser.add_argument("--public-only", action="store_true")
     parser.add_argument("--cpu", action="store_true",
                         help="also print CPU seconds per process role (see cpu_roles.py)")
+    add_json_option(parser, "dask_vs_local")
     ARGS = parser.parse_args()
     main()

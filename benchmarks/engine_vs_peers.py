@@ -45,6 +45,7 @@ import nbformat
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _record import Figure, add_json_option, record  # noqa: E402
 from grade_vs_nbgrader import HULL, build_batch  # noqa: E402
 
 PYTHON = sys.executable
@@ -285,13 +286,18 @@ def startup(cmd: list[str], tries: int = 3) -> tuple[float, float]:
     return best_cpu, best_wall
 
 
-def print_startup() -> None:
+def print_startup() -> list[Figure]:
     print("start-up (best of 3; CPU s / wall s):")
+    figures: list[Figure] = []
     for label, cmd in (("python -c pass", [PYTHON, "-c", "pass"]),
                        ("autograder --help", [PYTHON, "-m", "autograder", "--help"]),
                        ("autograder --version", [PYTHON, "-m", "autograder", "--version"])):
         cpu, wall = startup(cmd)
         print(f"  {label:<24} {cpu:6.3f} CPU s  {wall:6.3f} s")
+        peer = ("python -c pass", figures[0].value) if figures else ()
+        figures += [Figure(f"start-up, {label}: CPU", cpu, "s", *peer),
+                    Figure(f"start-up, {label}: wall", wall, "s")]
+    return figures
 
 
 # -- report ----------------------------------------------------------------------
@@ -311,7 +317,23 @@ def print_row(r: Run) -> Run:
     return r
 
 
-def print_ratios(runs: list[Run]) -> None:
+def run_figures(section: str, runs: list[Run]) -> list[Figure]:
+    """The printed rows of ``runs`` as figures named ``section: label: column``."""
+    found = []
+    for r in runs:
+        name = f"{section}: {r.label}"
+        found += [Figure(f"{name}: submissions/s", r.rate, "submissions/s"),
+                  Figure(f"{name}: steady", r.steady_rate, "submissions/s"),
+                  Figure(f"{name}: CPU per submission", r.cpu_ms, "ms"),
+                  Figure(f"{name}: grader", r.grader_ms, "ms CPU"),
+                  Figure(f"{name}: worker", r.worker_ms, "ms CPU"),
+                  Figure(f"{name}: first result", r.first_result, "s")]
+    return [f for f in found if f.value is not None]
+
+
+def print_ratios(runs: list[Run], section: str = "") -> list[Figure]:
+    """Print every ratio between ``runs`` that means something; return them as figures."""
+    figures = []
     by = {r.label: r for r in runs}
     pairs = [("autograder --jobs 1", "bare floor"), ("autograder --jobs 2", "bare floor"),
              ("autograder --jobs 2", "autograder --jobs 1"),
@@ -322,13 +344,18 @@ def print_ratios(runs: list[Run]) -> None:
         if a in by and b in by:
             print(f"  ratio {a} / {b}: {by[a].rate / by[b].rate:6.2f}x submissions/s, "
                   f"{by[a].cpu_ms / by[b].cpu_ms:6.2f}x CPU per submission", flush=True)
+            figures += [Figure(f"{section}: {a}: submissions/s", by[a].rate, "submissions/s",
+                               b, by[b].rate),
+                        Figure(f"{section}: {a}: CPU per submission", by[a].cpu_ms, "ms", b,
+                               by[b].cpu_ms)]
+    return figures
 
 
 #: submissions of the short trivial batch, whose figures are taken off the long one's
 SHORT = 10
 
 
-def trivial_overhead(work: Path, count: int) -> None:
+def trivial_overhead(work: Path, count: int) -> list[Figure]:
     """The engine overhead: CPU per submission of a one-cell, one-check assignment minus the floor's.
 
     Printed twice: with start-up spread over the batch (the rows), and per
@@ -342,22 +369,27 @@ def trivial_overhead(work: Path, count: int) -> None:
     short.mkdir()
     for path in notebooks[:SHORT]:
         shutil.copy(path, short / path.name)
+    section = f"trivial, {count} submissions"
     print_header(f"trivial assignment (one cell, one check), {count} submissions")
     floor = print_row(run_floor(folder, notebooks, False))
     engine = [print_row(run_engine(folder, batch, work / f"tout-{j}", j, False, count))
               for j in (1, 2)]
-    print_ratios([floor, *engine])
+    figures = run_figures(section, [floor, *engine]) + print_ratios([floor, *engine], section)
     for r in engine:
         print(f"  engine overhead, {r.label}: {r.cpu_ms - floor.cpu_ms:.1f} ms CPU per "
               f"submission, start-up included (total {r.cpu_ms:.1f} - floor {floor.cpu_ms:.1f})",
               flush=True)
+        figures.append(Figure(f"{section}: engine overhead, {r.label}, start-up included",
+                              r.cpu_ms - floor.cpu_ms, "ms CPU"))
     if count <= SHORT:
-        return
+        return figures
     extra = count - SHORT
     floor_short = run_floor(folder, notebooks[:SHORT], False)
     floor_ms = 1000 * (floor.cpu - floor_short.cpu) / extra
     print(f"  beyond start-up (the {count}-submission runs minus {SHORT}-submission runs):")
     print(f"    bare floor: {floor_ms:.1f} ms CPU per submission")
+    beyond = f"{section}, beyond start-up"
+    figures.append(Figure(f"{beyond}: bare floor", floor_ms, "ms CPU"))
     for jobs, long in zip((1, 2), engine):
         cut = run_engine(folder, short, work / f"tout-short-{jobs}", jobs, False, SHORT)
         cpu_ms = 1000 * (long.cpu - cut.cpu) / extra
@@ -366,6 +398,11 @@ def trivial_overhead(work: Path, count: int) -> None:
         print(f"    {long.label}: {cpu_ms:.1f} ms CPU per submission (grader "
               f"{cpu_ms - worker_ms:.1f}, worker {worker_ms:.1f}), {rate:.1f} submissions/s; "
               f"engine overhead {cpu_ms - floor_ms:.1f} ms", flush=True)
+        figures += [Figure(f"{beyond}: {long.label}: CPU per submission", cpu_ms, "ms",
+                           "bare floor", floor_ms),
+                    Figure(f"{beyond}: {long.label}: worker", worker_ms, "ms CPU"),
+                    Figure(f"{beyond}: {long.label}: rate", rate, "submissions/s")]
+    return figures
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -380,38 +417,53 @@ def main(argv: list[str] | None = None) -> int:
                         help="hull submissions for otter, the first of the batch (one `otter run` "
                              "each, several seconds apiece; default: 6)")
     parser.add_argument("--skip-peers", action="store_true", help="no nbgrader, no otter")
+    add_json_option(parser, "engine_vs_peers")
     args = parser.parse_args(argv)
     count, trivial = (12, min(40, args.trivial)) if args.quick else (args.count, args.trivial)
     if args.quick:
         args.otter_count = min(args.otter_count, 3)
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at start")
-    print_startup()
+    figures = print_startup()
     with tempfile.TemporaryDirectory(prefix="bench-peers-") as tmp:
         work = Path(tmp)
         if trivial:
-            trivial_overhead(work, trivial)
-        batch = work / "submitted"
-        notebooks = build_batch(batch, count)
-        peers: list[Run] = []
-        for public_only in (False, True):
-            print_header(f"hull, {count} submissions, "
-                         f"{'public checks only' if public_only else 'every check'} "
-                         "(peers: the notebook's own test cells)")
-            runs = [print_row(run_floor(HULL, notebooks, public_only))]
-            for jobs in (1, 2):
-                runs.append(print_row(run_engine(HULL, batch, work / f"out-{jobs}-{public_only}",
-                                                 jobs, public_only, count)))
-            if not args.skip_peers and not public_only:
-                peers.append(print_row(run_nbgrader(batch, work / "course", count)))
-                if args.otter:
-                    peers.append(print_row(run_otter(notebooks[:args.otter_count], work / "otter",
-                                                     args.otter)))
-                else:
-                    print("otter: not found; pass --otter PATH (pip install otter-grader in a venv)")
-            elif peers:  # the peers run their test cells only: the same runs for both lines
-                print("  (nbgrader and otter: the runs above)")
-            print_ratios(runs + peers)
+            figures += trivial_overhead(work, trivial)
+        figures += hull_runs(args, work, count)
+    peers = "no peers" if args.skip_peers else \
+        f"nbgrader and otter ({args.otter_count} submissions)" if args.otter else "nbgrader"
+    record("engine_vs_peers", figures, path=args.json,
+           notes=f"{count} hull submissions, {trivial} trivial ones; {peers}. CPU measured "
+           "from outside (reaped children and psutil samples of each command's tree).")
     return 0
+
+
+def hull_runs(args: argparse.Namespace, work: Path, count: int) -> list[Figure]:
+    """The hull batch, every check and the public checks: floor, engine and peers."""
+    batch = work / "submitted"
+    notebooks = build_batch(batch, count)
+    peers: list[Run] = []
+    figures: list[Figure] = []
+    for public_only in (False, True):
+        print_header(f"hull, {count} submissions, "
+                     f"{'public checks only' if public_only else 'every check'} "
+                     "(peers: the notebook's own test cells)")
+        runs = [print_row(run_floor(HULL, notebooks, public_only))]
+        for jobs in (1, 2):
+            runs.append(print_row(run_engine(HULL, batch, work / f"out-{jobs}-{public_only}",
+                                             jobs, public_only, count)))
+        if not args.skip_peers and not public_only:
+            peers.append(print_row(run_nbgrader(batch, work / "course", count)))
+            if args.otter:
+                peers.append(print_row(run_otter(notebooks[:args.otter_count], work / "otter",
+                                                 args.otter)))
+            else:
+                print("otter: not found; pass --otter PATH (pip install otter-grader in a venv)")
+        elif peers:  # the peers run their test cells only: the same runs for both lines
+            print("  (nbgrader and otter: the runs above)")
+        section = f"hull, {'public checks' if public_only else 'every check'}"
+        figures += run_figures(section, runs if public_only else runs + peers)
+        figures += print_ratios(runs + peers, section)
+    return figures
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from _record import Figure, add_json_option, record
+
 HERE = Path(__file__).resolve().parent
 EXAMPLES = HERE.parent / "assignments" / "hull" / "examples"
 
@@ -56,14 +58,22 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--python", default=sys.executable,
                         help="the Python whose autograder is run (default: this one)")
+    add_json_option(parser, "first_result")
     args = parser.parse_args()
     print(f"{'jobs':>4} {'first result':>13} {'end':>8} {'CPU':>8}   ({args.python})")
+    figures = []
     for jobs in args.jobs:
         runs = [one_run(args.python, jobs) for _ in range(args.runs)]
         for first, end, cpu in runs:
             print(f"{jobs:>4} {first:11.2f} s {end:6.2f} s {cpu:6.2f} s")
         first, end, cpu = (statistics.median(r[k] for r in runs) for k in range(3))
         print(f"{jobs:>4} {first:11.2f} s {end:6.2f} s {cpu:6.2f} s   median of {len(runs)}")
+        figures += [Figure(f"--jobs {jobs}: first result (median)", first, "s"),
+                    Figure(f"--jobs {jobs}: end (median)", end, "s"),
+                    Figure(f"--jobs {jobs}: CPU (median)", cpu, "s")]
+    record("first_result", figures, path=args.json,
+           notes=f"`autograder grade hull assignments/hull/examples`, medians of {args.runs} "
+           f"runs per --jobs value, with {args.python}.")
 
 
 if __name__ == "__main__":

@@ -35,6 +35,8 @@ import sys
 import time
 from typing import Callable
 
+from _record import Figure, add_json_option, record
+
 
 def _cpu(who: int) -> float:
     usage = resource.getrusage(who)
@@ -66,6 +68,7 @@ def forks(count: int, body: Callable[[], object]) -> tuple[float, float, float]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=40, help="forks per line (default 40)")
+    add_json_option(parser, "fork_floor")
     args = parser.parse_args(argv)
     print(f"load average {os.getloadavg()[0]:.2f}; {args.count} forks per line; ms per fork")
     print(f"  {'parent':<34} {'RSS MiB':>8} {'fork':>7} {'child':>7} {'CPU':>7} {'wall':>7} "
@@ -113,7 +116,35 @@ def main(argv: list[str] | None = None) -> int:
           f"(autograder.worker.hugepages, after the warm parent's 50th child); "
           f"ratio warm parent, 4 KiB / huge pages: {sum(rows[1][2][:2]) / sum(rows[5][2][:2]):.2f}x "
           f"bare child, {sum(rows[2][2][:2]) / sum(rows[6][2][:2]):.2f}x with one cell")
+    record("fork_floor", figures(rows, collapsed), path=args.json,
+           notes=f"{args.count} forks per line ({max(1, args.count // 4)} for the allocating "
+           "cell); ms of CPU per fork, the parent's share (fork) and the child's (to its exit).")
     return 0
+
+
+def figures(rows: list[tuple[str, float, tuple[float, float, float]]],
+            collapsed: int) -> list[Figure]:
+    """The printed table and ratios as figures; an indented line is named after the one above."""
+    found, bare, above = [], sum(rows[0][2][:2]), ""
+    for index, (label, rss, (parent, child, wall)) in enumerate(rows):
+        above = label if not label.startswith(" ") else above
+        name = label if not label.startswith(" ") else f"{above}, {label.strip()}"
+        peer = ("bare interpreter", bare) if index else ()
+        found += [Figure(f"{name}: CPU", parent + child, "ms", *peer),
+                  Figure(f"{name}: fork (parent)", parent, "ms"),
+                  Figure(f"{name}: child", child, "ms"),
+                  Figure(f"{name}: wall", wall, "ms"),
+                  Figure(f"{name}: parent RSS", rss, "MiB")]
+    cpu = [sum(times[:2]) for _, _, times in rows]
+    return found + [
+        Figure("allocating cell, without gc.freeze(): CPU", cpu[3], "ms", "with gc.freeze()",
+               cpu[4]),
+        Figure("huge pages: collapsed", collapsed / (1 << 20), "MiB"),
+        Figure("warm parent in 4 KiB pages, bare child: CPU", cpu[1], "ms", "in huge pages",
+               cpu[5]),
+        Figure("warm parent in 4 KiB pages, one cell: CPU", cpu[2], "ms", "in huge pages",
+               cpu[6]),
+    ]
 
 
 if __name__ == "__main__":

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import nbformat
+from _record import Figure, add_json_option, record
 
 ROOT = Path(__file__).resolve().parents[1]
 HULL = ROOT / "assignments" / "hull"
@@ -95,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--skip-nbgrader", action="store_true",
                         help="time only this engine (nbgrader takes a few seconds per notebook)")
+    add_json_option(parser, "grade_vs_nbgrader")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="bench-") as tmp:
         work = Path(tmp)
@@ -104,19 +106,28 @@ def main(argv: list[str] | None = None) -> int:
         # Every check (28 items, hidden sets up to 2000 points, run by the student's
         # code), then only the public checks: small inputs, like the two test cells
         # nbgrader runs, so that line compares the engines on equal work.
-        rates = {}
+        rates, figures = {}, []
         for label, extra in (("all checks", ()), ("public checks", ("--public-only",))):
             seconds = run_ours(batch, work / f"results-{len(rates)}", args.jobs, *extra)
             rates[label] = args.count / seconds
             print(f"autograder, {label:<14} (--jobs {args.jobs}): {seconds:7.1f} s  "
                   f"{rates[label]:7.2f} submissions/s")
-        if args.skip_nbgrader:
-            return 0
-        theirs = run_nbgrader(batch, work / "course")
-        theirs_rate = args.count / theirs
-        print(f"nbgrader autograde (its test cells):  {theirs:7.1f} s  {theirs_rate:7.2f} submissions/s")
-        for label, rate in rates.items():
-            print(f"ratio, autograder {label} / nbgrader: {rate / theirs_rate:.1f}x")
+            figures.append(Figure(f"autograder, {label} (--jobs {args.jobs}): time", seconds, "s"))
+        peer: tuple[str, float] | tuple[()] = ()
+        if not args.skip_nbgrader:
+            theirs = run_nbgrader(batch, work / "course")
+            theirs_rate = args.count / theirs
+            print(f"nbgrader autograde (its test cells):  {theirs:7.1f} s  {theirs_rate:7.2f} submissions/s")
+            for label, rate in rates.items():
+                print(f"ratio, autograder {label} / nbgrader: {rate / theirs_rate:.1f}x")
+            figures.append(Figure("nbgrader autograde (its test cells): time", theirs, "s"))
+            peer = ("nbgrader autograde", theirs_rate)
+        figures += [Figure(f"autograder, {label}: rate", rate, "submissions/s", *peer)
+                    for label, rate in rates.items()]
+    record("grade_vs_nbgrader", figures, path=args.json,
+           notes=f"{args.count} hull submissions (solution and typical wrong answers) in the "
+           "released template, start-up included"
+           + ("; nbgrader skipped." if args.skip_nbgrader else "."))
     return 0
 
 

@@ -91,13 +91,10 @@ def cases() -> list[Case]:
     ]  # fmt: skip
 
 
-if __name__ == "__main__":
-    import time
+if __name__ == "__main__":  # one run of these cases: reference_vs_scipy.py --repeat 1
+    import sys
+    from pathlib import Path
 
-    for name, ours_fn, theirs_fn, target in cases():
-        timings = []
-        for fn in (ours_fn, theirs_fn):
-            start = time.perf_counter()
-            fn()
-            timings.append(time.perf_counter() - start)
-        print(f"{name:<48} ours {timings[0]:.3f} s  scipy {timings[1]:.3f} s  ({target})")
+    from reference_vs_scipy import main
+
+    sys.exit(main(["--repeat", "1", *sys.argv[1:]], only=Path(__file__).stem))

@@ -93,16 +93,10 @@ def memory_peaks() -> list[tuple[str, int, int]]:
     ]
 
 
-if __name__ == "__main__":
-    import time
+if __name__ == "__main__":  # one run of these cases: reference_vs_scipy.py --repeat 1
+    import sys
+    from pathlib import Path
 
-    for name, ours_fn, theirs_fn, target in cases():
-        timings = []
-        for fn in (ours_fn, theirs_fn):
-            start = time.perf_counter()
-            fn()
-            timings.append(time.perf_counter() - start)
-        print(f"{name:<48} ours {timings[0]:.3f} s  scipy {timings[1]:.3f} s  ({target})")
-    for name, ours_peak, theirs_peak in memory_peaks():
-        mib = ours_peak / 2**20, theirs_peak / 2**20
-        print(f"{name:<48} peak ours {mib[0]:.1f} MiB  scipy {mib[1]:.1f} MiB")
+    from reference_vs_scipy import main
+
+    sys.exit(main(["--repeat", "1", *sys.argv[1:]], only=Path(__file__).stem))

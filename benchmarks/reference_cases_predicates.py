@@ -67,3 +67,12 @@ def cases() -> list[Case]:
          "price of exactness"),
         ("orient2d_many, 1e5 int64 triples near 2**62", *_int64_pair(), "exact integers"),
     ]  # fmt: skip
+
+
+if __name__ == "__main__":  # one run of these cases: reference_vs_scipy.py --repeat 1
+    import sys
+    from pathlib import Path
+
+    from reference_vs_scipy import main
+
+    sys.exit(main(["--repeat", "1", *sys.argv[1:]], only=Path(__file__).stem))

@@ -46,3 +46,12 @@ def cases() -> list[tuple[str, Callable[[], object], Callable[[], object], str]]
         (f"CubicSpline 1e3 knots + 1e6 evals: {label}", *pair(data, bc, t), TARGET)
         for label, data, bc, t in spec
     ]
+
+
+if __name__ == "__main__":  # one run of these cases: reference_vs_scipy.py --repeat 1
+    import sys
+    from pathlib import Path
+
+    from reference_vs_scipy import main
+
+    sys.exit(main(["--repeat", "1", *sys.argv[1:]], only=Path(__file__).stem))

@@ -32,6 +32,7 @@ from pathlib import Path
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _record import Figure, add_json_option, record  # noqa: E402
 from engine_vs_peers import write_trivial  # noqa: E402
 
 from autograder.engine.assignment import load_assignment  # noqa: E402
@@ -85,10 +86,34 @@ def print_window(w: Window) -> None:
           f"{w.worker_rss:11.1f} {w.grader_fds:6d}", flush=True)
 
 
+def figures(windows: list[Window]) -> list[Figure]:
+    """Every window's line, then the last window against the first 60 submissions."""
+    found = []
+    for w in windows:
+        span = f"submissions {w.first}-{w.first + w.count - 1}"
+        found += [Figure(f"{span}: CPU (grader + worker)", w.grader_ms + w.worker_ms, "ms"),
+                  Figure(f"{span}: grader CPU", w.grader_ms, "ms"),
+                  Figure(f"{span}: worker CPU", w.worker_ms, "ms"),
+                  Figure(f"{span}: wall", w.wall_ms, "ms"),
+                  Figure(f"{span}: grader RSS", w.grader_rss, "MiB"),
+                  Figure(f"{span}: worker RSS", w.worker_rss, "MiB"),
+                  Figure(f"{span}: grader open descriptors", w.grader_fds, "fds")]
+    base, last = windows[0], windows[-1]
+    peer = "first 60 submissions"
+    return found + [
+        Figure("last window: CPU", last.grader_ms + last.worker_ms, "ms", peer,
+               base.grader_ms + base.worker_ms),
+        Figure("last window: wall", last.wall_ms, "ms", peer, base.wall_ms),
+        Figure("last window: grader memory", last.grader_rss, "MiB", peer, base.grader_rss),
+        Figure("last window: worker memory", last.worker_rss, "MiB", peer, base.worker_rss),
+    ]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=1000, help="submissions (default 1000)")
     parser.add_argument("--window", type=int, default=100, help="submissions per line")
+    add_json_option(parser, "scale")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="bench-scale-") as tmp:
         work = Path(tmp)
@@ -113,6 +138,10 @@ def main(argv: list[str] | None = None) -> int:
               f"wall {last.wall_ms / base.wall_ms:.2f}x, grader memory "
               f"{last.grader_rss / base.grader_rss:.2f}x, worker memory "
               f"{last.worker_rss / base.worker_rss:.2f}x; load average {os.getloadavg()[0]:.2f} at end")
+    record("scale", figures(windows), path=args.json,
+           notes=f"One grader, the trivial assignment, {args.count} submissions after one "
+           f"warm-up, in windows of {args.window}; CPU and wall ms per submission, memory and "
+           "descriptors at each window's end.")
     return 0
 
 

@@ -33,11 +33,12 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _record import Figure, add_json_option, record  # noqa: E402
 from engine_vs_peers import HULL, run_floor, write_trivial  # noqa: E402
 
 from autograder.engine import student_process  # noqa: E402
 from autograder.engine.assignment import load_assignment  # noqa: E402
-from autograder.runners.batch import grade_one  # noqa: E402
+from autograder.runners.local import grade_one  # noqa: E402
 from autograder.engine.grader import Grader  # noqa: E402
 
 TICK = os.sysconf("SC_CLK_TCK")
@@ -84,6 +85,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=300)
     parser.add_argument("--hull", action="store_true", help="the hull examples, every check")
+    add_json_option(parser, "submission_split")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="split-") as scratch:
         root = Path(scratch)
@@ -131,6 +133,19 @@ def main() -> None:
     print(f"  bare floor (same files, one warm process) {floor_ms:.2f}")
     print(f"  ratio engine / floor: {total / floor_ms:.1f}x; "
           f"engine overhead {total - floor_ms:.2f} ms")
+    record("submission_split", [
+        Figure("wall per submission", wall_ms, "ms"),
+        Figure("grader", grader_ms, "ms CPU"),
+        Figure("warm parent (fork, request)", parent_ms, "ms CPU"),
+        Figure("child, with its exit", children_ms, "ms CPU"),
+        Figure("child: to 'started' (fork, sandbox)", started, "ms CPU"),
+        Figure("child: cells, to 'ready'", ready - started, "ms CPU"),
+        Figure("child: calls, to the kill", before_kill - ready, "ms CPU"),
+        Figure("child: exit and the rest (by difference)", children_ms - before_kill, "ms CPU"),
+        Figure("engine total", total, "ms CPU", "bare floor", floor_ms),
+        Figure("engine overhead (total - floor)", total - floor_ms, "ms CPU"),
+    ], path=args.json, notes=f"{name}: {n} submissions on one grader (after 20 not counted), "
+       "CPU ms per submission; the child's marks are medians.")
 
 
 if __name__ == "__main__":
