@@ -1,6 +1,7 @@
 """Where one submission's time goes: grade hull submissions with one Grader and time each phase.
 
-Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF] [--trivial]``.
+Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]
+[--trivial]``.
 
 Grades ``count`` submissions (the hull assignment's examples, in turn, or with
 ``--trivial`` the one-cell, one-check assignment of ``engine_vs_peers.py``) with one
@@ -19,21 +20,17 @@ warm worker and is not counted, and times each phase of every submission:
   was a whole ``pytest.main`` per submission (configuration, plugins, importing
   and collecting the checks);
 * checks: the check items, with the child's time answering their calls;
-* sweep: killing the child and sweeping the slot (:func:`autograder.engine.slot.kill_child`
-  and :func:`~autograder.engine.slot.sweep_slot`), most of whose wall time is the
+* sweep: killing the child and sweeping the slot (:func:`autograder.sandbox.reaper.kill_child`
+  and :func:`~autograder.sandbox.reaper.sweep_slot`), most of whose wall time is the
   killed child's own exit;
 * other: the rest of ``Grader.grade`` (reading the notebook, results).
 
 For each phase it prints the median wall and CPU milliseconds per submission and
 the phase's share of all CPU (from the means; grader, warm parent and child
-together). With ``--before REF`` it also runs the old code of ``REF`` in the same
-run: the old scan on every submission's cells beside the new one (and checks both
-report the same), and the old sweep on every other submission, and prints the
-ratios old / new. The old modules (:data:`BEFORE_MODULES`) are read with ``git
-show`` and run beside this checkout's others, so ``REF`` must have the rooms layout
-(:data:`ROOMS` or later): an older commit's modules import the flat layout's
-(``autograder.cgroups``, ``autograder.protocol``), which this checkout no longer
-has; for those, run this script in a worktree of that commit.
+together). With ``--before REF`` (default: the commit before the sweep and scan
+changes) it also runs the old code of ``REF`` in the same run: the old scan on
+every submission's cells beside the new one (and checks both report the same),
+and the old sweep on every other submission, and prints the ratios old / new.
 CPU of the child is read from ``/proc/<pid>/stat``; figures move with the load of
 the machine, the ratios (taken in one run) less. Not a test: nothing is asserted.
 """
@@ -41,7 +38,6 @@ the machine, the ratios (taken in one run) less. Not a test: nothing is asserted
 from __future__ import annotations
 
 import argparse
-import importlib
 import statistics
 import subprocess
 import sys
@@ -61,22 +57,15 @@ from autograder.engine import checkrun  # noqa: E402
 
 from autograder.engine import grader  # noqa: E402
 
-from autograder.engine import slot  # noqa: E402
+from autograder.engine import student_process  # noqa: E402
 
 from autograder.engine import staticscan  # noqa: E402
 from autograder.engine.assignment import load_assignment  # noqa: E402
 from autograder.sandbox.cputime import process_cpu_seconds  # noqa: E402
-from _record import Figure, add_json_option, record  # noqa: E402
 
 HULL = ROOT / "assignments" / "hull"
-#: the first commit of the rooms layout: ``--before`` takes it or a later one
-ROOMS = "6852cb0"
-#: the modules whose code at ``--before REF`` runs beside this checkout's, and their paths
-#: there (the rooms layout); the last commit before the sweep (issue 14, issue 9) and scan
-#: changes, 5fc7bef, had them as autograder/cgroups.py, staticscan.py and session.py
-BEFORE_MODULES = {"cgroups": "autograder/sandbox/cgroups.py",
-                  "staticscan": "autograder/engine/staticscan.py",
-                  "slot": "autograder/engine/slot.py"}
+#: the last commit before the sweep (issue 14, issue 9) and scan changes
+BEFORE = "5fc7bef"
 PHASES = ("static scan", "worker start/sandbox", "notebook run", "pytest session/collection",
           "checks", "sweep", "other")
 
@@ -131,65 +120,28 @@ class PytestTimer:
         self.probe().add("checks", time.perf_counter() - wall, time.process_time() - cpu)
 
 
-def _git_show(ref: str, path: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(["git", "-C", str(ROOT), "show", f"{ref}:{path}"],
-                          capture_output=True, text=True)
-
-
 def load_before(ref: str) -> dict[str, types.ModuleType] | None:
-    """The modules of :data:`BEFORE_MODULES` as they were at ``ref``, calling each other
-    and this checkout's other modules; None, with the reason printed, if they cannot be
-    loaded (not a git checkout, ``ref`` unknown, or ``ref`` older than the rooms layout)."""
-    if _git_show(ref, BEFORE_MODULES["slot"]).returncode != 0 \
-            and _git_show(ref, "autograder/session.py").returncode == 0:
-        print(f"(no old code path: {ref} has the flat layout from before the rooms ({ROOMS}); "
-              "its modules import autograder.cgroups, autograder.protocol and others that this "
-              f"checkout no longer has, so they cannot run beside it. Pass --before {ROOMS} or "
-              f"a later commit, or run this script in a worktree of {ref}.)")
-        return None
+    """The modules cgroups, session and staticscan as they were at ``ref``; None if git
+    cannot show them (not a git checkout, or ``ref`` unknown)."""
     modules: dict[str, types.ModuleType] = {}
-    for name, path in BEFORE_MODULES.items():
-        shown = _git_show(ref, path)
+    for name in ("cgroups", "staticscan", "session"):
+        shown = subprocess.run(["git", "-C", str(ROOT), "show", f"{ref}:autograder/{name}.py"],
+                               capture_output=True, text=True)
         if shown.returncode != 0:
-            print(f"(no old code path: git show {ref}:{path} failed: "
+            print(f"(no old code path: git show {ref}:autograder/{name}.py failed: "
                   f"{shown.stderr.strip()[:200]})")
             return None
         module = types.ModuleType(f"before_{name}")
         sys.modules[module.__name__] = module  # dataclasses look their module up
-        try:
-            exec(compile(shown.stdout, f"{ref}:{path}", "exec"), module.__dict__)
-        except ImportError as exc:
-            print(f"(no old code path: {ref}:{path} imports what this checkout has not: {exc})")
-            return None
+        exec(compile(shown.stdout, f"{ref}:autograder/{name}.py", "exec"), module.__dict__)
         modules[name] = module
-    # Each old module imported this checkout's version of the others: point it at the old
-    # ones (module attributes; a name imported from one of them stays this checkout's).
-    old = {id(importlib.import_module(path[:-3].replace("/", "."))): modules[name]
-           for name, path in BEFORE_MODULES.items()}
-    for module in modules.values():
-        for attribute, value in list(vars(module).items()):
-            if isinstance(value, types.ModuleType) and id(value) in old:
-                setattr(module, attribute, old[id(value)])
+    modules["session"].cgroups = modules["cgroups"]
     return modules
 
 
 def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType] | None,
                old_sweep: Callable[[], bool], scan_pairs: list[tuple[float, float, bool]]) -> None:
     """Wrap the engine's phases (in this process only) so that they report to ``current()``."""
-    instrument_scan(current, before, scan_pairs)
-    instrument_child(current)
-    instrument_sweep(current, before, old_sweep)
-    prepare = checkrun._prepareconfig
-
-    def prepareconfig(args: Any, plugins: Any = None) -> Any:
-        return prepare(args, plugins=[*(plugins or []), PytestTimer(current)])
-    checkrun._prepareconfig = prepareconfig
-    grader.CheckSuite.run = timed(current, "pytest", grader.CheckSuite.run)
-
-
-def instrument_scan(current: Callable[[], Probe], before: dict[str, types.ModuleType] | None,
-                    scan_pairs: list[tuple[float, float, bool]]) -> None:
-    """Time the static scan; with ``before``, run the old one beside it and compare reports."""
     new_scan = staticscan.scan
 
     def old_scan(sources: Any, forbid: Any) -> tuple[Any, float]:
@@ -214,12 +166,9 @@ def instrument_scan(current: Callable[[], Probe], before: dict[str, types.Module
         return report
     staticscan.scan = scan
 
+    spawn, wait = student_process.StudentProcess._spawn, student_process.StudentProcess._await
 
-def instrument_child(current: Callable[[], Probe]) -> None:
-    """Time the child's start (to "started", the fork included) and its cells (to "ready")."""
-    spawn, wait = slot.StudentProcess._spawn, slot.StudentProcess._await
-
-    def spawn_child(self: slot.StudentProcess) -> None:
+    def spawn_child(self: student_process.StudentProcess) -> None:
         warm = self.slot.warm_parent
         warm_before = process_cpu_seconds(warm) if warm else 0.0
         wall, cpu = time.perf_counter(), time.process_time()
@@ -227,7 +176,7 @@ def instrument_child(current: Callable[[], Probe]) -> None:
         fork = process_cpu_seconds(self.slot.warm_parent or 0) - warm_before  # its fork()
         current().spawned = (wall, cpu, max(0.0, fork))
 
-    def await_message(self: slot.StudentProcess, *args: Any) -> Any:
+    def await_message(self: student_process.StudentProcess, *args: Any) -> Any:
         message = wait(self, *args)
         op = message.get("op") if isinstance(message, dict) else None
         probe = current()
@@ -242,18 +191,14 @@ def instrument_child(current: Callable[[], Probe]) -> None:
             probe.add("notebook run", time.perf_counter() - probe.child.pop("mark"), 0.0,
                       probe.child["ready"] - probe.child.get("started", 0.0))
         return message
-    slot.StudentProcess._spawn, slot.StudentProcess._await = spawn_child, await_message
+    student_process.StudentProcess._spawn = spawn_child
+    student_process.StudentProcess._await = await_message
 
-
-def instrument_sweep(current: Callable[[], Probe], before: dict[str, types.ModuleType] | None,
-                     old_sweep: Callable[[], bool]) -> None:
-    """Time the kill and the sweep (the old ones when ``old_sweep()``); charge the child's
-    time answering the checks' calls, read just before the kill, to the checks."""
-    kill_child, sweep_slot = slot.kill_child, slot.sweep_slot
+    kill_child, sweep_slot = student_process.kill_child, student_process.sweep_slot
 
     def kill(pid: int, pidfd: int | None) -> None:
         if before is not None and old_sweep():
-            before["slot"].kill_child(pid, pidfd)
+            before["session"].kill_group(pid)
         else:
             kill_child(pid, pidfd)
     timed_kill = timed(current, "sweep", kill)
@@ -266,11 +211,18 @@ def instrument_sweep(current: Callable[[], Probe], before: dict[str, types.Modul
 
     def sweep(policy: Any, slot: int, warm_parent: int | None, child: Any = None) -> None:
         if before is not None and old_sweep():
-            before["slot"].sweep_slot(policy, slot, warm_parent, child)
+            before["session"].sweep_slot(policy, slot, warm_parent)
         else:
             sweep_slot(policy, slot, warm_parent, child)
-    slot.kill_child = read_then_kill
-    slot.sweep_slot = timed(current, "sweep", sweep)
+    student_process.kill_child = read_then_kill
+    student_process.sweep_slot = timed(current, "sweep", sweep)
+
+    prepare = checkrun._prepareconfig
+
+    def prepareconfig(args: Any, plugins: Any = None) -> Any:
+        return prepare(args, plugins=[*(plugins or []), PytestTimer(current)])
+    checkrun._prepareconfig = prepareconfig
+    grader.CheckSuite.run = timed(current, "pytest", grader.CheckSuite.run)
 
 
 def median_ms(values: list[float]) -> float:
@@ -280,18 +232,16 @@ def median_ms(values: list[float]) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", type=int, default=24, help="submissions to time (default 24)")
-    parser.add_argument("--before", default=None, metavar="REF",
-                        help="git revision whose scan and sweep to compare with, in the rooms "
-                        f"layout ({ROOMS} or later; default: none)")
-    parser.add_argument("--no-before", action="store_true",
-                        help="time this code only (the default; kept for old command lines)")
+    parser.add_argument("--before", default=BEFORE,
+                        help="git revision whose scan and sweep to compare with "
+                        f"(default {BEFORE})")
+    parser.add_argument("--no-before", action="store_true", help="time this code only")
     parser.add_argument("--trivial", action="store_true",
                         help="profile the one-cell, one-check assignment of engine_vs_peers.py "
                         "instead of hull (the engine's own overhead)")
-    add_json_option(parser, "engine_profile")
     options = parser.parse_args()
 
-    before = None if options.no_before or not options.before else load_before(options.before)
+    before = None if options.no_before else load_before(options.before)
     probes: list[Probe] = [Probe()]
     scan_pairs: list[tuple[float, float, bool]] = []
     old_sweep = lambda: len(probes) % 2 == 0  # noqa: E731 - every other submission
@@ -306,15 +256,8 @@ def main() -> None:
         else:
             folder, examples = HULL, sorted((HULL / "examples").glob("*.ipynb"))
         rows = profile(folder, examples, options.count, probes, old_sweep, scan_pairs)
-    name = "trivial assignment" if options.trivial else "hull"
-    figures = report(rows, before is not None, name)
-    if before is not None:
-        figures += report_before(rows, scan_pairs, options.before)
-    record("engine_profile", figures, path=options.json,
-           notes=f"{name}, {options.count} submissions on one Grader after one warm-up; medians "
-           "per submission (the CPU total and shares from means); CPU = grader + warm parent + "
-           "child." + (f" Old code of {options.before} on every other submission."
-                       if before is not None else ""))
+    report(rows, scan_pairs, before is not None, options.before,
+           "trivial assignment" if options.trivial else "hull")
 
 
 def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
@@ -334,9 +277,9 @@ def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
     return rows
 
 
-def report(rows: list[tuple[Probe, bool, float, float]], compared: bool,
-           name: str) -> list[Figure]:
-    """Print the breakdown by phase; return it as figures."""
+def report(rows: list[tuple[Probe, bool, float, float]],
+           scan_pairs: list[tuple[float, float, bool]], compared: bool, ref: str,
+           name: str) -> None:
     # With --before the old sweep ran on every other submission: the breakdown uses the others.
     current = [row for row in rows if not (compared and row[1])] or rows
     for probe, _, wall, cpu in current:
@@ -351,51 +294,33 @@ def report(rows: list[tuple[Probe, bool, float, float]], compared: bool,
           "after one warm-up submission; CPU = grader + warm parent + child")
     print(f"{'phase':28} {'wall ms':>9} {'CPU ms':>9} {'grader':>8} {'worker':>8} "
           f"{'CPU share':>10}")
-    figures = []
     for phase in PHASES:
-        columns = (median_ms([p.wall[phase] for p, *_ in current]),
-                   median_ms([p.total_cpu(phase) for p, *_ in current]),
-                   median_ms([p.cpu[phase] for p, *_ in current]),
-                   median_ms([p.worker[phase] for p, *_ in current]),
-                   100 * means[phase] / total)
-        print(f"{phase:28} {columns[0]:9.1f} {columns[1]:9.1f} {columns[2]:8.1f} "
-              f"{columns[3]:8.1f} {columns[4]:9.1f}%")
-        figures += [Figure(f"{phase}: {column}", value, unit) for column, value, unit in zip(
-            ("wall", "CPU", "grader CPU", "worker CPU", "CPU share"), columns,
-            ("ms", "ms", "ms", "ms", "%"))]
-    whole, collection, grader_ms = (median_ms([w for _, _, w, _ in current]),
-                                    median_ms([p.wall['collection'] for p, *_ in current]),
-                                    median_ms([c for *_, c in current]))
-    print(f"{'whole submission':28} {whole:9.1f} {1000 * total:9.1f}"
+        print(f"{phase:28} {median_ms([p.wall[phase] for p, *_ in current]):9.1f} "
+              f"{median_ms([p.total_cpu(phase) for p, *_ in current]):9.1f} "
+              f"{median_ms([p.cpu[phase] for p, *_ in current]):8.1f} "
+              f"{median_ms([p.worker[phase] for p, *_ in current]):8.1f} "
+              f"{100 * means[phase] / total:9.1f}%")
+    print(f"{'whole submission':28} {median_ms([w for _, _, w, _ in current]):9.1f} "
+          f"{1000 * total:9.1f}"
           "   (medians per submission; the CPU total and shares are from means)")
-    print(f"  of which collection (inside the pytest session): {collection:.1f} ms wall")
-    print(f"grader process CPU per submission: {grader_ms:.1f} ms "
+    print("  of which collection (inside the pytest session): "
+          f"{median_ms([p.wall['collection'] for p, *_ in current]):.1f} ms wall")
+    print(f"grader process CPU per submission: {median_ms([c for *_, c in current]):.1f} ms "
           "(median; every phase's grader column and the rest of Grader.grade)")
-    return figures + [Figure("whole submission: wall (median)", whole, "ms"),
-                      Figure("whole submission: CPU (mean)", 1000 * total, "ms"),
-                      Figure("collection, inside the pytest session: wall", collection, "ms"),
-                      Figure("grader process CPU per submission", grader_ms, "ms")]
-
-
-def report_before(rows: list[tuple[Probe, bool, float, float]],
-                  scan_pairs: list[tuple[float, float, bool]], ref: str) -> list[Figure]:
-    """Print the old code's sweep and scan beside this checkout's; return them as figures."""
+    if not compared:
+        return
     old = [p for p, is_old, *_ in rows if is_old]
     new = [p for p, is_old, *_ in rows if not is_old]
     print(f"\nbefore ({ref}) / after, in this run (medians per submission):")
-    figures = []
     for label, pick in (("sweep wall", lambda p: p.wall["sweep"]),
                         ("sweep CPU", lambda p: p.cpu["sweep"])):
         o, n = median_ms([pick(p) for p in old]), median_ms([pick(p) for p in new])
         print(f"  {label:11} before {o:8.2f} ms  after {n:8.2f} ms  ratio {_ratio(o, n)}"
               f"  ({len(old)} / {len(new)} submissions)")
-        figures.append(Figure(f"{label}, code of {ref}", o, "ms", "this checkout", n))
     o, n = median_ms([a for a, _, _ in scan_pairs]), median_ms([b for _, b, _ in scan_pairs])
     same = sum(s for _, _, s in scan_pairs)
     print(f"  {'scan wall':11} before {o:8.2f} ms  after {n:8.2f} ms  ratio {_ratio(o, n)}"
           f"  (same report on {same} of {len(scan_pairs)} submissions)")
-    return figures + [Figure(f"scan wall, code of {ref}", o, "ms", "this checkout", n),
-                      Figure("scan: same report", same, f"of {len(scan_pairs)} submissions")]
 
 
 def _ratio(before: float, after: float) -> str:

@@ -48,9 +48,8 @@ import numpy  # noqa: E402,F401
 import scipy.interpolate  # noqa: E402,F401
 import scipy.spatial  # noqa: E402,F401
 
-from _record import Figure, add_json_option, record  # noqa: E402
-
-from autograder.sandbox import confine  # noqa: E402
+from autograder.sandbox import confine, landlock, readable  # noqa: E402
+from autograder.sandbox.policy import IsolationPolicy  # noqa: E402
 
 from autograder.sandbox import seccomp  # noqa: E402
 from autograder.worker import execute  # noqa: E402
@@ -92,19 +91,13 @@ def children(count: int, work: Path, body: Callable[[Path], object]) -> tuple[fl
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=200, help="children per line (default 200)")
-    add_json_option(parser, "sandbox_costs")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="sandbox-costs-") as scratch:
-        figures = measure(args.count, Path(scratch))
-    record("sandbox_costs", figures, path=args.json,
-           notes=f"uid {os.geteuid()}; {args.count} children per line; CPU ms per child with "
-           "its exit; busy: the whole machine's ms per child, counted until 0.5 s after the "
-           "last.")
-    return 0
+        return measure(args.count, Path(scratch))
 
 
-def measure(count: int, root: Path) -> list[Figure]:
-    """Print the table, with the children's folders in ``root``; return its figures."""
+def measure(count: int, root: Path) -> int:
+    """Print the table, with the children's folders in ``root``."""
     os.chmod(root, 0o711)
     work = root / "work"
     work.mkdir(mode=0o711)
@@ -112,23 +105,21 @@ def measure(count: int, root: Path) -> list[Figure]:
     exclude = [ROOT]
     shell = execute.make_shell()
     execute.warm_up(shell)
-    confine.prime_caches()
+    readable.prime_caches()
     seccomp.prepare_filters()
-    whole = confine.IsolationPolicy()
+    whole = IsolationPolicy()
     print(f"load average {os.getloadavg()[0]:.2f}; uid {os.geteuid()}; {count} children "
           "per line; ms per child (busy: the whole machine's, counted until 0.5 s after the last)")
     print(f"  {'child':<36} {'CPU':>7} {'busy':>7} {'CPU ratio':>10}")
     gc.freeze()
     bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
-    figures = [Figure("bare fork (peer): CPU", bare, "ms"),
-               Figure("bare fork (peer): busy", busy, "ms")]
 
-    def line(label: str, policy: confine.IsolationPolicy, *, with_cell: bool = False) -> None:
+    def line(label: str, policy: IsolationPolicy, *, with_cell: bool = False) -> None:
         probe = Path(tempfile.mkdtemp(dir=work))
-        confine.coverable_folders(exclude, probe, policy)
+        readable.coverable_folders(exclude, probe, policy)
         confine.prepare_cgroup(policy, 0)
-        shared = confine.shared_landlock(policy, work, exclude)
+        shared = landlock.shared_landlock(policy, work, exclude)
         os.rmdir(probe)
 
         def enter(workdir: Path) -> None:
@@ -145,9 +136,6 @@ def measure(count: int, root: Path) -> list[Figure]:
         for name, body in bodies:
             cpu, busy = children(count, work, body)
             print(f"  {name:<36} {cpu:7.2f} {busy:7.2f} {cpu / bare:9.1f}x", flush=True)
-            label = name.strip() if not name.startswith(" ") else f"whole sandbox, {name.strip()}"
-            figures.extend([Figure(f"{label}: CPU", cpu, "ms", "bare fork", bare),
-                            Figure(f"{label}: busy", busy, "ms")])
         shared.close()
 
     # Before the parent moves into the slot's empty network namespace, each child makes its own.
@@ -158,7 +146,7 @@ def measure(count: int, root: Path) -> list[Figure]:
                           ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),
                           ("user switch", "drop_user")):
         line(f"  without {part}", dataclasses.replace(whole, **{setting: False}))
-    return figures
+    return 0
 
 
 if __name__ == "__main__":
