@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import autograder
+from autograder.engine.celltests import CellTest
 from autograder.engine.forbidden import Rules
 from autograder.errors import AssignmentError
 
@@ -95,6 +96,14 @@ class Assignment:
         SHA-256 over ``assignment.toml`` and every file under ``checks/``
         (path and contents, sorted by relative path): changes when grading
         could change.
+    notebooks : tuple of Path
+        Every instructor notebook of the assignment, ``notebook`` first; a student
+        hands in one notebook of the same file name for each. Default:
+        ``(notebook,)``.
+    cell_tests : tuple of CellTest
+        Tests written as notebook cells (nbgrader or otter courses).
+    requirements : tuple of str
+        Extra packages the student's code needs (pip requirement strings).
     """
 
     name: str
@@ -109,6 +118,13 @@ class Assignment:
     call_timeout: float = 10.0
     limits: tuple[tuple[str, int | float], ...] = ()
     checks_digest: str = ""
+    notebooks: tuple[Path, ...] = ()
+    cell_tests: tuple[CellTest, ...] = ()
+    requirements: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.notebooks:
+            object.__setattr__(self, "notebooks", (self.notebook,))
 
 
 def default_search_root() -> Path:
