@@ -347,11 +347,22 @@ def _roster(args: argparse.Namespace) -> int:
     from autograder.service.server import import_roster, open_course
 
     course = open_course(args.course, database=args.database)
-    count, tokens = import_roster(course, args.roster, tokens_out=args.tokens)
-    print(f"Imported {count} people into {course.name}.")
-    print(f"New access tokens: {tokens} (send each person theirs; the database keeps only hashes)."
-          if tokens else "Everyone already had a token; none were made.")
+    done = import_roster(course, args.roster, tokens_out=args.tokens)
+    print(f"Imported {len(done.added) + len(done.already)} people into {course.name}.")
+    print(f"Added ({len(done.added)}): {_names(done.added)}.")
+    print(f"Already there, name, email and role updated, token kept ({len(done.already)}): "
+          f"{_names(done.already)}.")
+    print(f"New access tokens: {done.new_tokens}, added to {done.tokens} beside the "
+          f"{done.kept_tokens} already there (send each person theirs; the database keeps only "
+          "hashes)." if done.tokens else "Everyone already had a token; none were made.")
     return 0
+
+
+def _names(ids: tuple[str, ...], most: int = 30) -> str:
+    if not ids:
+        return "nobody"
+    shown = ", ".join(ids[:most])
+    return shown if len(ids) <= most else f"{shown} and {len(ids) - most} more"
 
 
 def _submit(args: argparse.Namespace) -> int:

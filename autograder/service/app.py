@@ -23,6 +23,7 @@ from fastapi.staticfiles import StaticFiles
 from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.service import api_routes, pages_staff, pages_student
+from autograder.service.bounds import BodyLimit
 from autograder.service.course import Course
 from autograder.service.storage import Storage
 from autograder.service.web import HERE, NeedSignIn, Service, http_error, need_sign_in, security_headers
@@ -36,6 +37,8 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
     app.state.service = Service(course, factory, Storage(course.data_dir),
                                 secret or secrets.token_bytes(32))
     app.middleware("http")(security_headers)
+    # outermost of ours: every body is counted before any route or parser reads it
+    app.add_middleware(BodyLimit, max_upload_bytes=course.max_upload_bytes)
     app.add_exception_handler(NeedSignIn, need_sign_in)
     app.add_exception_handler(HTTPException, http_error)
     for router in (pages_student.router, api_routes.router, pages_staff.router):

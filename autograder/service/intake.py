@@ -37,18 +37,31 @@ def check_notebook(data: bytes, max_bytes: int) -> None:
                              status=422) from None
 
 
+def precheck(factory: sessionmaker[Session], course: Course, *, user_id: str, assignment: str,
+             now: dt.datetime | None = None) -> AssignmentPolicy:
+    """Refuse an upload the assignment or the hourly limit would refuse, before it is read.
+
+    The service calls this right after signing the user in, so an upload over the
+    limit costs one database read, not the reading and parsing of its body.
+    """
+    policy = course.assignment(assignment)
+    if policy is None:
+        raise UploadRejected(f"There is no assignment {assignment!r} in this course.", status=404)
+    now = now or utcnow()
+    with factory() as session:
+        _check_open(session, policy, user_id, now)
+        _check_rate(session, course, user_id, assignment, now)
+    return policy
+
+
 def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, user_id: str,
            assignment: str, filename: str, data: bytes,
            now: dt.datetime | None = None) -> Submission:
     """Check an upload and queue it; raise :class:`UploadRejected` with the reason otherwise."""
-    policy = course.assignment(assignment)
-    if policy is None:
-        raise UploadRejected(f"There is no assignment {assignment!r} in this course.", status=404)
     if len(data) > course.max_upload_bytes:  # before parsing anything
         check_notebook(data, course.max_upload_bytes)
     now = now or utcnow()
-    with factory() as session:
-        _check_open(session, policy, user_id, now)
+    policy = precheck(factory, course, user_id=user_id, assignment=assignment, now=now)
     check_notebook(data, course.max_upload_bytes)
     with factory.begin() as session:
         session.execute(select(User).where(User.id == user_id).with_for_update()).scalar_one()
