@@ -36,9 +36,10 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
     app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
     app.state.service = Service(course, factory, Storage(course.data_dir),
                                 secret or secrets.token_bytes(32))
-    app.middleware("http")(security_headers)
-    # outermost of ours: every body is counted before any route or parser reads it
+    # the innermost middleware, so the routes' parsers read the body through it directly and
+    # its 413 reaches the routes' handlers as it is (not wrapped by another middleware's task group)
     app.add_middleware(BodyLimit, max_upload_bytes=course.max_upload_bytes)
+    app.middleware("http")(security_headers)
     app.add_exception_handler(NeedSignIn, need_sign_in)
     app.add_exception_handler(HTTPException, http_error)
     for router in (pages_student.router, api_routes.router, pages_staff.router):

@@ -91,26 +91,28 @@ class Service:
         return cached
 
     def _who(self, request: Request) -> Who | None:
+        header = self.course.trusted_header
+        client = request.client.host if request.client else ""
+        bearer = request.headers.get("authorization", "")
         with self.factory() as session:
-            header = self.course.trusted_header
-            client = request.client.host if request.client else ""
             if header and client in self.course.trusted_proxies and request.headers.get(header):
                 user = session.get(User, request.headers[header].strip())
                 return None if user is None else Who(user.id, user.role,
                                                       self.proxy_csrf(user.id), "proxy")
-            bearer = request.headers.get("authorization", "")
-            if bearer.lower().startswith("bearer "):
-                address = client_address(request)
-                wait = throttle.wait_seconds(session, address)
-                if wait:
-                    raise TooManyWrongTokens(wait)
-                user = auth.user_for_token(session, bearer[7:].strip())
-                if user is None:
-                    self.wrong_token(address)
-                return None if user is None else Who(user.id, user.role, "", "bearer")
-            signed = auth.find_session(session, request.cookies.get(SESSION_COOKIE),
-                                       lifetime=self.course.session_lifetime)
-            return None if signed is None else Who(signed.user_id, signed.role, signed.csrf, "cookie")
+            if not bearer.lower().startswith("bearer "):
+                signed = auth.find_session(session, request.cookies.get(SESSION_COOKIE),
+                                           lifetime=self.course.session_lifetime)
+                return None if signed is None else Who(signed.user_id, signed.role, signed.csrf,
+                                                       "cookie")
+            address = client_address(request)
+            wait = throttle.wait_seconds(session, address)
+            if wait:
+                raise TooManyWrongTokens(wait)
+            user = auth.user_for_token(session, bearer[7:].strip())
+            if user is not None:
+                return Who(user.id, user.role, "", "bearer")
+        self.wrong_token(address)  # its own transaction, after this one (SQLite: one writer)
+        return None
 
     def wrong_token(self, address: str) -> int:
         """Count a wrong access token from ``address``; the seconds it must now wait."""
