@@ -201,7 +201,8 @@ def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentPar
     ros.add_argument("roster", type=Path, help="CSV with columns id, name, email and optionally role")
     ros.add_argument("--database", default=None, metavar="URL", help="as for `autograder serve`")
     ros.add_argument("--tokens", type=Path, default=None, metavar="FILE",
-                     help="where to write the new access tokens (default: tokens.csv in the data folder)")
+                     help="the tokens CSV to add the new access tokens to, keeping the tokens already "
+                          "in it (default: tokens.csv in the data folder)")
 
     sub = commands.add_parser("submit", help="submit a notebook to a grading service and print the score")
     sub.add_argument("notebook", type=Path, help="your notebook")
