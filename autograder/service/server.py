@@ -12,6 +12,7 @@ from sqlalchemy import func, select
 
 from autograder.engine.assignment import load_assignment
 from autograder.errors import UsageError
+from autograder.results.files import atomic_write_bytes
 from autograder.runners.backends import load_dask_backend
 from autograder.runners.jobs import DaskSpec
 from autograder.service import auth
@@ -63,7 +64,7 @@ def import_roster(course: Course, roster: Path, *, tokens_out: Path | None = Non
             if not changes.issued:
                 return RosterImport(changes.added, changes.already, None, 0, 0)
             kept = auth.kept_tokens(session, _read_text(out), besides=(u.id for u, _ in changes.issued))
-            _write_private(out, auth.tokens_csv([*kept, *changes.issued]))
+            atomic_write_bytes(out, auth.tokens_csv([*kept, *changes.issued]).encode(), mode=0o600)
         return RosterImport(changes.added, changes.already, out, len(changes.issued), len(kept))
     finally:
         engine.dispose()
@@ -77,22 +78,6 @@ def _read_text(path: Path) -> str:
     except OSError as exc:
         raise UsageError(f"Cannot read the tokens file {str(path)!r} to add to it: {exc.strerror}; "
                          "nothing was changed.") from None
-
-
-def _write_private(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically, readable by this user only (0600)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def _secret(course: Course) -> bytes:

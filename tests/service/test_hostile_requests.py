@@ -29,7 +29,7 @@ from typing import Any
 import httpx
 import pytest
 import svc_support as support
-from conftest import MAX_BYTES, PER_HOUR, Running, class_course
+from conftest import PER_HOUR, Running, class_course
 from sqlalchemy import text
 
 from autograder.service.settings import FORM_BYTES, SIGN_IN_FAILURES, SIGN_IN_WINDOW_MINUTES
