@@ -173,7 +173,13 @@ def unpack_zip(path: Path, scratch: Path, limits: ZipLimits = ZipLimits()) -> tu
             if len(members) > limits.max_members:
                 raise _Refused(f"it holds {len(members)} files; at most {limits.max_members} "
                                "are accepted")
-            written = 0
+            declared = sum(i.file_size for i in members)
+            if declared > limits.max_total_bytes:
+                raise _Refused(f"it unpacks to {declared / 1e6:.1f} MB; at most "
+                               f"{limits.max_total_bytes / 1e6:.1f} MB are accepted")
+            for info in members:  # what the zip declares, before writing anything
+                _check_ratio(info, info.file_size, limits)
+            written = 0  # and what it really holds, as it is written (headers can lie)
             for info in members:
                 written += _extract(archive, info, target, limits, limits.max_total_bytes - written)
     except _Refused as exc:
@@ -214,13 +220,17 @@ def _extract(archive: zipfile.ZipFile, info: zipfile.ZipInfo, target: Path,
         while block := member.read(1 << 16):
             written += len(block)
             if written > budget:
-                raise _Refused(f"it unpacks to more than {limits.max_total_bytes // 2**20} MiB")
-            if (written > limits.ratio_floor
-                    and written > limits.max_ratio * max(info.compress_size, 1)):
-                raise _Refused(f"{info.filename!r} is compressed more than "
-                               f"{limits.max_ratio:g} times (a zip bomb?)")
+                raise _Refused(f"it unpacks to more than {limits.max_total_bytes / 1e6:.1f} MB; "
+                               "at most that is accepted")
+            _check_ratio(info, written, limits)
             out.write(block)
     return written
+
+
+def _check_ratio(info: zipfile.ZipInfo, size: int, limits: ZipLimits) -> None:
+    if size > limits.ratio_floor and size > limits.max_ratio * max(info.compress_size, 1):
+        raise _Refused(f"{info.filename!r} is compressed more than {limits.max_ratio:g} times "
+                       "(a zip bomb?)")
 
 
 def _member_parts(name: str) -> tuple[str, ...]:
