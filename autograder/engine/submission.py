@@ -17,6 +17,7 @@ and names and types (no absolute paths, no ``..``, no links, no devices).
 from __future__ import annotations
 
 import hashlib
+import io
 import os
 import stat
 import zipfile
@@ -259,6 +260,24 @@ def _make_dirs(target: Path, parts: Sequence[str]) -> Path:
     return folder
 
 
+def submission_bytes(path: Path) -> tuple[bytes, str]:
+    """What to send for ``path`` to a grader on another machine: (bytes, file name).
+
+    A file as it is; a folder as a zip of its regular files (links and special files
+    are left out: they would be refused in the folder too), which
+    :func:`open_submission` unpacks there into the same files.
+    """
+    path = Path(path)
+    if not path.is_dir() or path.is_symlink():
+        return path.read_bytes(), path.name
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for file in _files_below(path):
+            if stat.S_ISREG(os.lstat(file).st_mode):
+                archive.write(file, file.relative_to(path).as_posix())
+    return buffer.getvalue(), f"{path.name}.zip"
+
+
 def submission_sha256(path: Path) -> str:
     """SHA-256 of what was handed in: a file's bytes, or a folder's names and bytes.
 
@@ -293,4 +312,4 @@ def file_sha256(path: Path) -> str:
 
 
 __all__ = ["IGNORED_FOLDERS", "Submission", "ZipLimits", "is_zip", "open_submission",
-           "file_sha256", "submission_sha256", "unpack_zip"]
+           "file_sha256", "submission_bytes", "submission_sha256", "unpack_zip"]

@@ -132,3 +132,27 @@ def test_zips_are_graded_and_hostile_ones_get_a_result(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     flagged = {a["id"] for a in summary["attention"]}
     assert flagged == {"bomb", "link", "traversal", "absolute", "device", "broken"}
+
+
+def test_a_folder_sent_to_another_machine_arrives_as_the_same_files(tmp_path: Path) -> None:
+    """A Dask node gets bytes: a folder goes as a zip and is unpacked into the same choice."""
+    from autograder.engine.submission import submission_bytes
+
+    folder = tmp_path / "alice" / "hull"
+    (folder / ".ipynb_checkpoints").mkdir(parents=True)
+    (folder / "hull.ipynb").write_bytes(SOLUTION.read_bytes())
+    (folder / "hull-Copy1.ipynb").write_text("{}")
+    (folder / ".ipynb_checkpoints" / "hull-checkpoint.ipynb").write_text("{}")
+    (folder / "passwd.ipynb").symlink_to("/etc/passwd")
+    data, name = submission_bytes(folder)
+    assert name == "hull.zip"
+    sent = tmp_path / "node" / name
+    sent.parent.mkdir()
+    sent.write_bytes(data)
+    (tmp_path / "s1").mkdir()
+    (tmp_path / "s2").mkdir()
+    here = open_submission(folder, [HULL / "hull.ipynb"], scratch=tmp_path / "s1")
+    there = open_submission(sent, [HULL / "hull.ipynb"], scratch=tmp_path / "s2")
+    assert there.notebook.read_bytes() == here.notebook.read_bytes() == SOLUTION.read_bytes()
+    assert [p.name for p in there.extras] == ["hull-Copy1.ipynb"]
+    assert len(there.notes) == 1 and "hull-Copy1.ipynb" in there.notes[0]
