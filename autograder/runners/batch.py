@@ -129,7 +129,7 @@ def _submissions_below(folder: Path, assignment: str | None) -> list[Path]:
         if folder.name == "submitted" or any((d / assignment).is_dir() for d in students):
             return [d / assignment for d in students if (d / assignment).is_dir()
                     and not (d / assignment).is_symlink()] + _loose_files(folder)
-    return _files_below(folder)
+    return _files_below(folder, assignment)
 
 
 def _loose_files(folder: Path) -> list[Path]:
@@ -140,10 +140,14 @@ def _is_submission(name: str) -> bool:
     return name.endswith(".ipynb") or name.lower().endswith(".zip")
 
 
-def _files_below(folder: Path) -> list[Path]:
-    """Notebooks and zips under ``folder``, links included, without following linked folders."""
+def _files_below(folder: Path, assignment: str | None = None) -> list[Path]:
+    """Notebooks and zips under ``folder``, links included, without following linked folders;
+    a ``submitted`` folder below is read as nbgrader's layout (with ``assignment``)."""
     found = []
     for directory, subdirs, files in os.walk(folder, followlinks=False):
+        if assignment is not None and "submitted" in subdirs:
+            subdirs.remove("submitted")
+            found += _submissions_below(Path(directory, "submitted"), assignment)
         subdirs[:] = sorted(d for d in subdirs if d not in IGNORED_FOLDERS)
         found += [Path(directory, name) for name in sorted(files) if _is_submission(name)]
     return found

@@ -49,6 +49,8 @@ def test_the_class_folder_gives_one_submission_per_student_of_that_assignment(tm
     assert found == [sub / s / "hull" for s in ("alice", "bob", "carol")]
     assert assign_ids(found) == {sub / s / "hull": s for s in ("alice", "bob", "carol")}
     assert collect_submissions([sub], "spline_car") == [sub / s / "spline_car" for s in ("alice", "bob", "dave")]
+    # the folder holding submitted/ reads it the same way
+    assert collect_submissions([tmp_path], "hull") == [sub / s / "hull" for s in ("alice", "bob", "carol")]
     # one student's folder, or one assignment folder, gives the same id
     assert assign_ids(collect_submissions([sub / "alice"], "hull")) == {sub / "alice" / "hull": "alice"}
     assert assign_ids(collect_submissions([sub / "bob" / "hull"], "hull")) == {sub / "bob" / "hull": "bob"}
