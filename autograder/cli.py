@@ -265,8 +265,11 @@ def _grade(args: argparse.Namespace) -> int:
     print("Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     if report.other_shards:
         print(f"Shard {args.shard}: {report.other_shards} submission(s) left to the other shards.")
-    print(f"Results: {args.out / 'grades.csv'} ({len(report.folder)} row(s), every result in the "
-          f"folder) and {args.out}/<id>/results.json")
+    print(f"Results: {args.out / 'grades.csv'} ({len(report.folder)} row(s), the submissions "
+          f"given) and {args.out}/<id>/results.json")
+    for sub_id, source in report.conflicts:
+        print(f"conflict: {source} was not graded: {args.out / sub_id} holds another file's "
+              "result (see the summary)", file=sys.stderr)
     print(f"Feedback: {args.out}/<id>/feedback.html; class summary: {args.out / 'summary.html'}")
     if args.junit is not None:
         print(f"JUnit XML: {args.junit}")

@@ -13,8 +13,10 @@ from pathlib import Path
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from autograder.engine.assignment import load_assignment
+from autograder.engine.identify import identify
 from autograder.engine.notebook import parse_notebook
-from autograder.errors import NotebookError, UploadRejected
+from autograder.errors import AssignmentError, NotebookError, UploadRejected
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
@@ -54,6 +56,23 @@ def precheck(factory: sessionmaker[Session], course: Course, *, user_id: str, as
     return policy
 
 
+def check_assignment(data: bytes, policy: AssignmentPolicy, filename: str) -> None:
+    """Raise :class:`UploadRejected` when ``data`` is another assignment's notebook.
+
+    A notebook of another assignment would be graded as a zero that nobody asked
+    for (:mod:`autograder.engine.identify` says whose it is).
+    """
+    try:
+        assignment = load_assignment(policy.spec)
+    except AssignmentError:  # the grader reports a broken assignment with the submission
+        return
+    notebook = parse_notebook(data, path=Path(filename or "notebook.ipynb").name)
+    problem = identify(notebook, assignment).problem
+    if problem:
+        raise UploadRejected(f"This upload was not accepted: {problem[0].upper()}{problem[1:]} "
+                             "Nothing was stored.", status=422)
+
+
 def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, user_id: str,
            assignment: str, filename: str, data: bytes,
            now: dt.datetime | None = None) -> Submission:
@@ -63,6 +82,7 @@ def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, 
     now = now or utcnow()
     policy = precheck(factory, course, user_id=user_id, assignment=assignment, now=now)
     check_notebook(data, course.max_upload_bytes)
+    check_assignment(data, policy, filename)
     with factory.begin() as session:
         session.execute(select(User).where(User.id == user_id).with_for_update()).scalar_one()
         deadline = _check_open(session, policy, user_id, now)
