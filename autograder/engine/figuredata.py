@@ -107,9 +107,6 @@ def receive_figure(data: Any) -> dict:
     budget = _Budget()
     if type(data) is not dict:
         return _figure([], "", b"", True, [f"a {type(data).__name__} was sent as a figure"])
-    for note in _listed(data.get("notes"))[:MAX_NOTES]:
-        if type(note) is str:
-            budget.note(note)
     axes = []
     given = _listed(data.get("axes"))
     if len(given) > MAX_AXES:
@@ -122,6 +119,10 @@ def receive_figure(data: Any) -> dict:
             budget.note(f"axes {i} was dropped: {why}")
     suptitle = _field(budget, "suptitle", lambda: budget.string(data.get("suptitle", "")), "")
     png = _field(budget, "picture", lambda: _png(data.get("png", b"")), b"")
+    # the worker's own notes after the grader's, in the room left
+    for note in _listed(data.get("notes"))[:MAX_NOTES]:
+        if type(note) is str:
+            budget.note(note)
     return _figure(axes, suptitle, png, data.get("truncated") is True or budget.truncated,
                    budget.notes)
 
