@@ -69,6 +69,8 @@ SUMMARY_VALUES = 8
 SUMMARY_ARGUMENTS = 8
 #: exceptions a traced function keeps in ``errors`` (each cut to 500 characters)
 MAX_KEPT_ERRORS = 100
+#: lines for the instructor's log (``grader.log``) per check
+MAX_NOTES = 20
 #: exception types passed on to the student's code as themselves (others as RuntimeError)
 _PASSED_ON = ("TypeError", "ValueError", "ZeroDivisionError", "OverflowError",
               "ArithmeticError", "FloatingPointError", "IndexError", "KeyError")
@@ -449,7 +451,7 @@ class CallbackRegistry:
         passed = ", ".join([_describe(a) for a in args[:SUMMARY_ARGUMENTS]] +
                            [f"{str(k)[:40]}={_describe(v)}"
                             for k, v in list(kwargs.items())[:SUMMARY_ARGUMENTS]])
-        if len(self.notes) < MAX_KEPT_ERRORS:
+        if len(self.notes) < MAX_NOTES:
             self.notes.append(f"`{function.name}` raised {text[:500]} when student code called "
                               f"it with {passed or 'no arguments'}")
         return _error(kind if kind in _PASSED_ON else "RuntimeError",
