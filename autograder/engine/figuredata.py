@@ -13,6 +13,7 @@ data's schema is ours: no library knows it.
 
 from __future__ import annotations
 
+import itertools
 import math
 import struct
 from typing import Any, Callable
@@ -36,6 +37,7 @@ __all__ = ["receive_figure", "receive_figures", "receive_value"]
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _CONTAINERS = (list, tuple, dict)
+_CONTAINER_SET = frozenset(_CONTAINERS)
 
 
 class _Drop(Exception):
@@ -94,7 +96,9 @@ def receive_value(value: Any, _depth: int = 0) -> Any:
         return value if all(new[k] is v for k, v in items) else new
     if t not in (list, tuple) or _depth >= limits.MAX_DEPTH:
         return value
-    if not set(map(type, value)) & set(_CONTAINERS):  # in C: a long list of numbers is quick
+    kinds = set(map(type, value))  # in C: a long list of numbers, or of points, is quick
+    if not kinds & _CONTAINER_SET or (kinds <= {list, tuple} and not set(
+            map(type, itertools.chain.from_iterable(value))) & _CONTAINER_SET):
         return value
     items = [receive_value(v, _depth + 1) for v in value]
     if all(a is b for a, b in zip(items, value)):

@@ -36,7 +36,7 @@ from autograder.boundary.figurelimits import (
 )
 from autograder.engine import callbacks
 from autograder.engine.callbacks import ArgumentSummary, traced
-from autograder.engine.figuredata import receive_figure
+from autograder.engine.figuredata import receive_figure, receive_value
 from autograder.engine.proxy import CallLog, Student
 from autograder.engine.slot import GradingSlot
 from autograder.engine.student_process import StudentProcess
@@ -288,6 +288,17 @@ def test_garbage_in_place_of_a_figure() -> None:
     assert receive_figure("x")["axes"] == []
     assert receive_figure({"$t": "figure", "axes": [7], "png": 3})["notes"] == [
         "axes 0 was dropped: a int, not axes data", "picture was dropped: a int, not PNG bytes"]
+
+
+def test_figures_deep_inside_a_returned_value_are_validated_too() -> None:
+    forged = {"$t": "figure", "axes": [], "png": HUGE_PNG, "suptitle": "S" * 10**6}
+    points = [(0.0, 1.0)] * 1000
+    value = {"plots": [(1, [forged])], "points": points}
+    got = receive_value(value)
+    figure = got["plots"][0][1][0]
+    assert figure["png"] == b"" and len(figure["suptitle"]) == MAX_TEXT_CHARS
+    assert got["points"] is points  # containers without figures are not copied
+    assert receive_value(points) is points
 
 
 # -- end to end: hidden data and result sizes ----------------------------------------
