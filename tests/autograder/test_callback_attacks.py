@@ -37,12 +37,11 @@ from autograder.boundary.figurelimits import (
 from autograder.engine import callbacks
 from autograder.engine.callbacks import ArgumentSummary, traced
 from autograder.engine.figuredata import receive_figure, receive_value
-from autograder.engine.proxy import CallLog, Student
+from autograder.engine.proxy import Student
 from autograder.engine.slot import GradingSlot
-from autograder.engine.student_process import StudentProcess
 from autograder.errors import StudentException, WorkerCrashed
-from autograder.sandbox.policy import IsolationPolicy
 from tests.support.assignments import submission, write_double
+from tests.support.students import running
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="the worker needs Linux (fork)")
 
@@ -145,12 +144,8 @@ def slot() -> Iterator[GradingSlot]:
 
 @pytest.fixture
 def student(slot: GradingSlot) -> Iterator[Student]:
-    session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
-                             policy=IsolationPolicy(), notebook_timeout=60)
-    report = session.start()
-    assert all(cell.ok for cell in report.cells), report.cells
-    yield Student(session, timeout=20, functions=report.functions, forbidden={}, log=CallLog())
-    session.close()
+    with running(slot, NOTEBOOK, timeout=20) as proxy:
+        yield proxy
 
 
 # -- 1. the grader's memory ----------------------------------------------------------

@@ -14,11 +14,10 @@ import pytest
 
 from autograder.engine import callbacks
 from autograder.engine.callbacks import traced
-from autograder.engine.proxy import CallLog, Student, StudentFunction
+from autograder.engine.proxy import Student, StudentFunction
 from autograder.engine.slot import GradingSlot
-from autograder.engine.student_process import StudentProcess
 from autograder.errors import CallTimeout, StudentException, UsageError
-from autograder.sandbox.policy import IsolationPolicy
+from tests.support.students import running
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="the worker needs Linux (fork)")
 
@@ -87,12 +86,8 @@ def slot() -> Iterator[GradingSlot]:
 
 @pytest.fixture
 def student(slot: GradingSlot) -> Iterator[Student]:
-    session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
-                             policy=IsolationPolicy(), notebook_timeout=60)
-    report = session.start()
-    assert all(cell.ok for cell in report.cells), report.cells
-    yield Student(session, timeout=5, functions=report.functions, forbidden={}, log=CallLog())
-    session.close()
+    with running(slot, NOTEBOOK, timeout=5) as proxy:
+        yield proxy
 
 
 def test_numpy_ufunc_hidden_lambda_and_list_of_functions(student: Student) -> None:
