@@ -98,7 +98,7 @@ def _wrap(value: Any, name: str, make: Callable[[Any, str], Any]) -> Any:
     if isinstance(value, (types.GetSetDescriptorType, types.MemberDescriptorType)):
         getter = value.__get__
         return property(make(lambda obj: getter(obj, type(obj)), name))
-    if isinstance(value, (types.BuiltinFunctionType,)) and getattr(value, "__name__", "") == "__new__":
+    if isinstance(value, types.BuiltinFunctionType) and value.__name__ == "__new__":
         return staticmethod(make(value, name))
     return make(value, name)
 

@@ -37,6 +37,7 @@ EVENT = "numgrade.guard.call"
 _DIGGING = frozenset({"gc.get_objects", "gc.get_referrers", "gc.get_referents"})
 #: always refused once the guard is on: a tracer or profiler is handed every frame
 _TRACING = frozenset({"sys.settrace", "sys.setprofile", "sys._current_frames"})
+_NO_FRAMES = "Taking frames is not allowed in code a library calls back while grading."
 #: attributes that hand out frames (raised as ``object.__getattr__``)
 _FRAME_ATTRS = frozenset({"tb_frame", "gi_frame", "cr_frame", "ag_frame"})
 
@@ -50,7 +51,7 @@ def _entry(key: int, audit: Callable[..., None] = sys.audit) -> Callable[..., An
         box: list[Any] = []
         audit(EVENT, key, box, args, kwargs)
         if len(box) != 2:
-            raise NotAllowedError("This function is not available while grading.")
+            raise NotAllowedError("This function is not allowed while grading.")
         if box[0]:
             return box[1]
         raise box[1]
@@ -106,18 +107,18 @@ def install(callers: Callers, prefixes: tuple[str, ...], files: frozenset[str],
         elif event == "sys._getframe":
             if inside[0] and threading.get_ident() not in own and args \
                     and callers.decide(args[0]) == STUDENT:
-                raise NotAllowedError("Frames are not available to your code here.")
+                raise NotAllowedError(_NO_FRAMES)
         elif event == "object.__getattr__":
             if inside[0] and len(args) > 1 and args[1] in _FRAME_ATTRS \
                     and callers.decide(requester()) == STUDENT:
-                raise NotAllowedError("Frames are not available to your code here.")
+                raise NotAllowedError(_NO_FRAMES)
         elif event == "import":
             if args and isinstance(args[0], str) and _matches(args[0], prefixes):
                 raise refuse(args[0])
         elif event in _DIGGING or event in _TRACING:
-            raise NotAllowedError(f"{event} is not available while grading.")
+            raise NotAllowedError(f"`{event}` is not allowed while grading.")
         elif event.startswith("ctypes.") and callers.decide(requester()) == STUDENT:
-            raise NotAllowedError(f"{event} is not available while grading.")
+            raise NotAllowedError(f"`{event}` is not allowed while grading.")
         elif event == "exec":
             filename = getattr(args[0], "co_filename", "") if args else ""
             if filename and _path_in(filename, files):

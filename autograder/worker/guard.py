@@ -115,7 +115,8 @@ def _classes(prefixes: tuple[str, ...], objects: dict[str, Any]) -> list[type]:
     return sorted(found, key=lambda c: len(c.__mro__))
 
 
-def _needing(modules: dict[str, types.ModuleType], objects: dict[str, Any]) -> list[types.ModuleType]:
+def _needing(modules: dict[str, types.ModuleType],
+             objects: dict[str, Any]) -> list[types.ModuleType]:
     """The loaded modules that may call an internal name: those of its package, and any
     other that holds a reference to it.
 
