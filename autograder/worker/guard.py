@@ -1,22 +1,26 @@
-"""Make an assignment's forbidden libraries unreachable in the worker, whatever the spelling.
+"""Make an assignment's forbidden libraries unusable in the worker, whatever the route.
 
 The static scan (``autograder.engine.staticscan``) names a forbidden use with a clear
 message, but names can be computed (``importlib.import_module("scipy." + "spatial")``,
 ``exec`` of a decoded string, ``vars(scipy)[...]``, a private alias inside an
-allowed module). This module enforces the rule on what runs:
+allowed module) and objects can be reached without a name (``__subclasses__``).
+This module enforces the rule on what runs:
 
-1. every forbidden module (and its submodules) is taken out of ``sys.modules``
-   and off its parent package; a forbidden attribute (``numpy.polyfit``) is
-   replaced on its module;
-2. every other reference to those objects found in a loaded module's namespace,
+1. every reference to a forbidden module's classes and functions (or to a
+   forbidden attribute such as ``numpy.polyfit``) in a loaded module's namespace,
    or in a class defined there, is replaced by a :class:`Blocked` stand-in that
-   raises :class:`NotAllowedError`, unless the assignment lists the name under
-   ``internal_use`` (a library the allowed ones need inside, such as
-   ``matplotlib.path`` for drawing);
-3. an audit hook (PEP 578; once added it cannot be removed) refuses any new
-   import of a forbidden module, by any route through the import system, and the
-   ``gc`` functions that could dig the originals out of memory;
-4. the grader also keeps the forbidden packages' folders out of the sandbox's
+   raises :class:`NotAllowedError`;
+2. every class defined in a forbidden module, found from ``object`` through
+   ``__subclasses__``, has its constructor and members replaced by stand-ins
+   (:mod:`autograder.worker.entrypoints`; C and Cython classes too);
+3. names an allowed library needs inside (``[rules] internal_use``, such as
+   ``matplotlib.bezier`` for drawing) stay usable by that library only: their
+   functions and methods become caller-checked entries (:mod:`autograder.worker.gate`,
+   :mod:`autograder.worker.callers`);
+4. an audit hook (PEP 578; once added it cannot be removed) refuses any new
+   import of a forbidden module, re-running or reading its files, and the ways to
+   dig objects or frames out of memory (``gc``, tracers, ``ctypes``);
+5. the grader also keeps the forbidden packages' folders out of the sandbox's
    readable paths, so their files cannot be loaded by hand.
 
 A call that reaches a blocked object raises :class:`NotAllowedError`, which the
