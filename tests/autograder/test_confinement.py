@@ -1,0 +1,267 @@
+"""What a submission's processes are charged, and what of the class they can see.
+
+Two attacks of issue 24, each graded end to end through :class:`~autograder.engine.grader.Grader`
+in a grader process of its own, once as root and once as an ordinary user:
+
+* **CPU in short-lived orphans.** The notebook does its work in processes that are
+  orphaned at once (a double fork) and exit long before the grader's next reading of
+  the clock. Every one must be charged: the CPU limit stops a notebook that keeps
+  doing so, and the recorded figure is within 5% of what the burners measured of
+  themselves (``getrusage`` in each, reported through files in the working directory).
+* **Classmates visible.** The notebook looks for other processes (``/proc``, the
+  parent's command line, ``kill(pid, 0)`` of the grader's pid and of every small pid)
+  and for the other submissions (by the paths on the grader's command line, by
+  listing the submissions folder and the results folder). It must find nothing.
+
+The ordinary user is uid ``ORDINARY_UID`` keeping one capability, ``CAP_DAC_READ_SEARCH``
+(ambient, so it survives ``exec``), only because the Python installation here lives
+under ``/root`` (mode 700): every decision of the engine follows ``geteuid() != 0``,
+so it takes the ordinary user's path (no cgroup, no user switch, a user namespace,
+the warm parent as subreaper). Where the kernel refuses a protection the engine must
+say so in the result's notes; the tests then check that note instead of the finding.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.support.assignments import CHECK, RIGHT, write_double
+from tests.support.envs import shared_tempdir
+
+REPO = Path(__file__).resolve().parents[2]
+ORDINARY_UID = 62000  # not a slot uid (61000 + slot)
+GRADER_TIMEOUT = 300  # wall-clock seconds a grader process may take before the test fails
+IDENTITIES = ["root", "user"] if os.geteuid() == 0 else ["self"]
+
+pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/stat"),
+                                reason="needs Linux (the sandbox and its clock)")
+
+#: The grader, run as ``python -c RUNNER SPEC ASSIGNMENT SUBMISSIONS OUT``: the
+#: submission folder is on its command line, as with ``autograder grade``. It writes
+#: the submissions (``GRADER_PID`` in their code replaced by its own pid), grades the
+#: one named, and prints the result as JSON.
+RUNNER = textwrap.dedent("""
+    import json, os, sys
+    from pathlib import Path
+    import nbformat
+    from autograder.engine.assignment import load_assignment
+    from autograder.engine.grader import Grader, GradingOptions
+    spec = json.loads(sys.argv[1])
+    assignment, folder, out = (Path(a) for a in sys.argv[2:5])
+    for name, cells in spec["submissions"].items():
+        cells = [c.replace("GRADER_PID", str(os.getpid())) for c in cells]
+        notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in cells])
+        nbformat.write(notebook, folder / f"{name}.ipynb")
+    options = GradingOptions(notebook_timeout=spec["timeout"])
+    with Grader(load_assignment(assignment), options) as grader:
+        result = grader.grade(folder / f"{spec['grade']}.ipynb", out_dir=out / spec["grade"])
+    print(json.dumps({"outcome": result.outcome, "stdout": result.stdout,
+                      "cpu": result.cpu_seconds, "notes": list(result.notes),
+                      "score": result.score}))
+""")
+
+# ------------------------------------------------------------------ the grader, as whom
+
+
+def _as_ordinary_user() -> None:  # runs in the forked child, before exec
+    libc = ctypes.CDLL(None, use_errno=True)
+    cap = 2  # CAP_DAC_READ_SEARCH
+
+    class Header(ctypes.Structure):
+        _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
+
+    class Data(ctypes.Structure):
+        _fields_ = [("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32),
+                    ("inheritable", ctypes.c_uint32)]
+
+    libc.prctl(8, 1, 0, 0, 0)  # PR_SET_KEEPCAPS
+    os.setgroups([])
+    os.setresgid(ORDINARY_UID, ORDINARY_UID, ORDINARY_UID)
+    os.setresuid(ORDINARY_UID, ORDINARY_UID, ORDINARY_UID)
+    data = (Data * 2)()
+    data[0].effective = data[0].permitted = data[0].inheritable = 1 << cap
+    if libc.capset(ctypes.byref(Header(0x20080522, 0)), data) != 0:
+        raise OSError(ctypes.get_errno(), "capset")
+    if libc.prctl(47, 2, cap, 0, 0) != 0:  # PR_CAP_AMBIENT, PR_CAP_AMBIENT_RAISE
+        raise OSError(ctypes.get_errno(), "PR_CAP_AMBIENT_RAISE")
+
+
+@pytest.fixture(params=IDENTITIES)
+def identity(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+@pytest.fixture
+def place() -> Iterator[Path]:
+    """A folder another user may enter (pytest's own is mode 700 as root)."""
+    top = shared_tempdir("numgrade-confinement-")
+    try:
+        yield top
+    finally:
+        shutil.rmtree(top, ignore_errors=True)
+
+
+def grade(place: Path, identity: str, submissions: dict[str, list[str]], name: str,
+          *, timeout: float) -> dict[str, Any]:
+    """Grade ``submissions[name]`` (the others lie beside it) in a grader process."""
+    assignment = write_double(place, "double", {"test_double.py": CHECK})
+    folder, out, tmp = place / "submissions", place / "results", place / "tmp"
+    for path in (folder, out, tmp):
+        path.mkdir()
+    tmp.chmod(0o700)
+    if identity == "user":
+        for path in (out, tmp):
+            os.chown(path, ORDINARY_UID, ORDINARY_UID)
+        folder.chmod(0o777)
+    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(REPO), "TMPDIR": str(tmp),
+           "HOME": str(tmp)}
+    spec = json.dumps({"submissions": submissions, "grade": name, "timeout": timeout})
+    proc = subprocess.run(
+        [sys.executable, "-c", RUNNER, spec, str(assignment), str(folder), str(out)],
+        env=env, capture_output=True, text=True, timeout=GRADER_TIMEOUT, cwd=place,
+        preexec_fn=_as_ordinary_user if identity == "user" else None)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return result
+
+
+def note_with(result: dict[str, Any], text: str) -> str | None:
+    return next((n for n in result["notes"] if text in n), None)
+
+
+# --------------------------------------------------------------------- CPU accounting
+
+#: Start a burner that is orphaned at once (its parent exits) and spends EACH seconds of
+#: CPU, then writes what getrusage says it used; returns when it is done.
+BURNER = textwrap.dedent("""
+    import os, resource, time
+
+    def burn(k, each):
+        middle = os.fork()
+        if middle == 0:
+            if os.fork() == 0:
+                start = time.process_time()
+                while time.process_time() - start < each:
+                    pass
+                used = resource.getrusage(resource.RUSAGE_SELF)
+                with open(f"burn-{k}.tmp", "w") as handle:
+                    handle.write(repr(used.ru_utime + used.ru_stime))
+                os.rename(f"burn-{k}.tmp", f"burn-{k}.txt")
+            os._exit(0)
+        os.waitpid(middle, 0)
+        while not os.path.exists(f"burn-{k}.txt"):
+            time.sleep(0.01)
+        while True:  # reap the orphan where it landed on us (we may be a PID namespace's init)
+            try:
+                if os.waitpid(-1, os.WNOHANG)[0] == 0:
+                    break
+            except ChildProcessError:
+                break
+        return float(open(f"burn-{k}.txt").read())
+""")
+BURNERS, EACH = 12, 0.25
+COUNTED = BURNER + textwrap.dedent(f"""
+    burned = sum(burn(k, {EACH}) for k in range({BURNERS}))
+    print(f"burned={{burned:.4f}}")
+""")
+ENDLESS = BURNER + "k = 0\nwhile True:\n    burn(k, 0.2)\n    k += 1\n"
+LIMIT = 3.0
+
+
+def test_cpu_of_short_lived_orphans_is_recorded(place: Path, identity: str) -> None:
+    result = grade(place, identity, {"burns": [COUNTED, RIGHT]}, "burns", timeout=60)
+    assert result["outcome"] == "graded", result
+    burned = float(result["stdout"].split("burned=")[1].split()[0])
+    assert burned >= BURNERS * EACH
+    # The notebook's own work (forking, waiting, the check's call) is small beside it.
+    assert abs(result["cpu"] - burned) <= 0.05 * burned, (result["cpu"], burned)
+
+
+def test_the_cpu_limit_stops_work_done_in_short_lived_orphans(place: Path, identity: str) -> None:
+    result = grade(place, identity, {"endless": [ENDLESS, RIGHT]}, "endless", timeout=LIMIT)
+    assert result["outcome"] == "timeout", result
+    # Stopped at the limit, not at the wall-clock backstop (4 x the limit + 15 s): what
+    # was recorded is the limit's worth, plus one reading's overshoot and the second cell.
+    assert LIMIT <= result["cpu"] <= LIMIT * 1.05 + 0.5, result["cpu"]
+    assert result["score"] == 1.0  # the cells after the stopped one still ran
+
+
+# ------------------------------------------------------------------------- visibility
+
+LOOK = textwrap.dedent("""
+    import json, os
+    found = {"self": os.getpid(), "ppid": os.getppid(),
+             "proc": sorted(int(n) for n in os.listdir("/proc") if n.isdigit())}
+
+    def read(path):
+        try:
+            with open(path, "rb") as handle:
+                return handle.read().decode(errors="replace")
+        except OSError as exc:
+            return "refused: " + type(exc).__name__
+
+    def alive(pid):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:  # it exists, only the signal is refused
+            return True
+        return True
+
+    found["ppid_cmdline"] = read(f"/proc/{os.getppid()}/cmdline")
+    found["grader_alive"] = alive(GRADER_PID)
+    found["grader_cmdline"] = read("/proc/GRADER_PID/cmdline")
+    found["others_alive"] = [p for p in range(2, 4096) if p != os.getpid() and alive(p)]
+    # The grader's command line names the assignment, the submissions and the results.
+    stats, listings = {}, {}
+    for folder in ("SUBMISSIONS", "RESULTS"):
+        try:
+            listings[folder] = os.listdir(folder)
+        except OSError as exc:
+            listings[folder] = "refused: " + type(exc).__name__
+    for path in ("SUBMISSIONS/classmate.ipynb", "SUBMISSIONS/looker.ipynb"):
+        try:
+            info = os.stat(path)
+            stats[path] = [info.st_size, info.st_mtime]
+        except OSError as exc:
+            stats[path] = "refused: " + type(exc).__name__
+    found["listings"], found["stats"] = listings, stats
+    print("FOUND=" + json.dumps(found))
+""")
+CLASSMATE = "def double(x):\n    return x + x  # the classmate's secret way\n"
+
+
+def test_nothing_of_the_class_is_visible(place: Path, identity: str) -> None:
+    look = (LOOK.replace("SUBMISSIONS", str(place / "submissions"))
+            .replace("RESULTS", str(place / "results")))
+    result = grade(place, identity, {"classmate": [CLASSMATE], "looker": [look, RIGHT]},
+                   "looker", timeout=60)
+    assert result["outcome"] == "graded", result
+    found = json.loads(result["stdout"].split("FOUND=")[1].splitlines()[0])
+    missing = note_with(result, "visible to the submission")
+    if missing is not None:  # the kernel refused the PID namespace: the engine says so
+        pytest.skip(f"no PID namespace here, and the result says so: {missing}")
+    assert note_with(result, "PID namespace") is not None, result["notes"]
+    assert found["self"] == 1 and found["ppid"] == 0
+    assert found["proc"] == [1]
+    assert found["ppid_cmdline"].startswith("refused")
+    assert found["grader_alive"] is False
+    assert found["grader_cmdline"].startswith("refused")
+    assert found["others_alive"] == []
+    covered = note_with(result, "covered by empty mounts")
+    if covered is None:  # no mount namespace: Landlock alone, which lets stat through
+        pytest.skip("no mount namespace here: the folders are not covered")
+    assert found["listings"] == {str(place / "submissions"): [], str(place / "results"): []}
+    assert all(str(v).startswith("refused") for v in found["stats"].values()), found["stats"]
