@@ -162,18 +162,21 @@ BURNER = textwrap.dedent("""
         os.waitpid(middle, 0)
         while not os.path.exists(f"burn-{k}.txt"):
             time.sleep(0.01)
-        while True:  # reap the orphan where it landed on us (we may be a PID namespace's init)
-            try:
-                if os.waitpid(-1, os.WNOHANG)[0] == 0:
-                    break
-            except ChildProcessError:
-                break
+        try:  # reap the orphan if it landed on us (in a PID namespace, we are its init)
+            os.waitpid(-1, 0)
+        except ChildProcessError:  # it went to the warm parent
+            pass
         return float(open(f"burn-{k}.txt").read())
 """)
-BURNERS, EACH = 12, 0.25
+BURNERS, EACH = 12, 0.3
+#: ``ran`` is everything the notebook's process tree used, forks and exits included: the
+#: notebook process's own time and that of the children it reaped (in a PID namespace,
+#: the notebook process is its init, so every orphan is reaped by it)
 COUNTED = BURNER + textwrap.dedent(f"""
     burned = sum(burn(k, {EACH}) for k in range({BURNERS}))
-    print(f"burned={{burned:.4f}}")
+    mine, reaped = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    ran = mine.ru_utime + mine.ru_stime + reaped.ru_utime + reaped.ru_stime
+    print(f"burned={{burned:.4f}} ran={{ran:.4f}}")
 """)
 ENDLESS = BURNER + "k = 0\nwhile True:\n    burn(k, 0.2)\n    k += 1\n"
 LIMIT = 3.0
@@ -183,9 +186,13 @@ def test_cpu_of_short_lived_orphans_is_recorded(place: Path, identity: str) -> N
     result = grade(place, identity, {"burns": [COUNTED, RIGHT]}, "burns", timeout=60)
     assert result["outcome"] == "graded", result
     burned = float(result["stdout"].split("burned=")[1].split()[0])
+    ran = float(result["stdout"].split("ran=")[1].split()[0])
     assert burned >= BURNERS * EACH
-    # The notebook's own work (forking, waiting, the check's call) is small beside it.
-    assert abs(result["cpu"] - burned) <= 0.05 * burned, (result["cpu"], burned)
+    if note_with(result, "PID namespace:") is not None:  # the notebook reaped every burner
+        assert ran >= burned
+        # What the sandbox's set-up and the check's call add is small beside it.
+        assert abs(result["cpu"] - ran) <= 0.05 * ran, (result["cpu"], ran, burned)
+    assert result["cpu"] >= burned, (result["cpu"], burned)
 
 
 def test_the_cpu_limit_stops_work_done_in_short_lived_orphans(place: Path, identity: str) -> None:
@@ -263,5 +270,9 @@ def test_nothing_of_the_class_is_visible(place: Path, identity: str) -> None:
     covered = note_with(result, "covered by empty mounts")
     if covered is None:  # no mount namespace: Landlock alone, which lets stat through
         pytest.skip("no mount namespace here: the folders are not covered")
-    assert found["listings"] == {str(place / "submissions"): [], str(place / "results"): []}
-    assert all(str(v).startswith("refused") for v in found["stats"].values()), found["stats"]
+    # Landlock refuses listing the empty mounts; either way no name shows.
+    assert set(found["listings"]) == {str(place / "submissions"), str(place / "results")}
+    assert all(v == [] or v == "refused: PermissionError" for v in found["listings"].values())
+    # Not even stat (which Landlock lets through) finds a submission: sizes and times stay hidden.
+    assert found["stats"] == {str(place / "submissions" / f"{name}.ipynb"): "refused: FileNotFoundError"
+                              for name in ("classmate", "looker")}
