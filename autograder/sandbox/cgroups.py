@@ -12,8 +12,8 @@ Every process a submission starts stays in its slot's cgroup, whatever it does
   through ``/proc``: ``cgroup.kill`` (cgroup v2), or freeze, kill, thaw (v1 freezer).
 
 Where it applies: root, with the cgroup v2 ``cpu`` and ``pids`` controllers on the
-unified hierarchy, or else with the v1 ``cpu`` (and, if mounted, ``pids`` and
-``freezer``) hierarchies. An ordinary user gets none (a delegated v2 subtree would
+unified hierarchy, or else with the v1 ``cpu`` (and, if mounted, ``pids``, ``cpuacct``
+and ``freezer``) hierarchies. An ordinary user gets none (a delegated v2 subtree would
 need the grader itself moved into a leaf first), and the grader says so once.
 
 Why by hand: the cgroup file system *is* the interface (a few ``mkdir`` and

@@ -38,11 +38,12 @@ Already-open file descriptors (the socket to the grader, the pipes for output) k
 working: neither Landlock nor the user switch affects them.
 
 Without the user switch (not root, or ``drop_user=False``) the child shares the
-grader's uid, and Landlock does not stop it from reading ``/proc/<pid>/environ`` of
-the grader's processes (it blocks ptrace attach and ``/proc/<pid>/mem`` only). Start
-the grader's processes with a clean environment, or make them non-dumpable
-(``prctl(PR_SET_DUMPABLE, 0)``), in that setting. Command lines in
-``/proc/<pid>/cmdline`` are readable by every user, as always on Linux.
+grader's uid; without a PID namespace as well, Landlock does not stop it from reading
+``/proc/<pid>/environ`` of the grader's processes (it blocks ptrace attach and
+``/proc/<pid>/mem`` only). Start the grader's processes with a clean environment, or
+make them non-dumpable (``prctl(PR_SET_DUMPABLE, 0)``), in that setting. Without a
+PID namespace, command lines in ``/proc/<pid>/cmdline`` are readable by every user,
+as always on Linux.
 """
 
 from __future__ import annotations

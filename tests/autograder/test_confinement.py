@@ -13,17 +13,14 @@ in a grader process of its own, once as root and once as an ordinary user:
   and for the other submissions (by the paths on the grader's command line, by
   listing the submissions folder and the results folder). It must find nothing.
 
-The ordinary user is uid ``ORDINARY_UID`` keeping one capability, ``CAP_DAC_READ_SEARCH``
-(ambient, so it survives ``exec``), only because the Python installation here lives
-under ``/root`` (mode 700): every decision of the engine follows ``geteuid() != 0``,
-so it takes the ordinary user's path (no cgroup, no user switch, a user namespace,
-the warm parent as subreaper). Where the kernel refuses a protection the engine must
-say so in the result's notes; the tests then check that note instead of the finding.
+The ordinary user runs Debian's Python in a venv of its own (as in ``test_problems.py``)
+with the engine from this checkout: no cgroup, no user switch, a user namespace, the
+warm parent as subreaper. Where the kernel refuses a protection the engine must say
+so in the result's notes; the tests then check that note instead of the finding.
 """
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
 import shutil
@@ -36,11 +33,13 @@ from typing import Any
 
 import pytest
 
+from tests.support import envs
 from tests.support.assignments import CHECK, RIGHT, write_double
-from tests.support.envs import shared_tempdir
 
 REPO = Path(__file__).resolve().parents[2]
-ORDINARY_UID = 62000  # not a slot uid (61000 + slot)
+#: what the engine needs besides the worker's stack, for the ordinary user's venv
+PACKAGES = ("nbformat", "pytest", "jinja2", "tqdm", "landlockpy", "pyseccomp")
+NEEDED = ("numpy", "scipy", "matplotlib", "IPython", "nbformat", "landlockpy", "pyseccomp")
 GRADER_TIMEOUT = 300  # wall-clock seconds a grader process may take before the test fails
 IDENTITIES = ["root", "user"] if os.geteuid() == 0 else ["self"]
 
@@ -57,13 +56,15 @@ RUNNER = textwrap.dedent("""
     import nbformat
     from autograder.engine.assignment import load_assignment
     from autograder.engine.grader import Grader, GradingOptions
+    from autograder.sandbox.policy import IsolationPolicy
     spec = json.loads(sys.argv[1])
     assignment, folder, out = (Path(a) for a in sys.argv[2:5])
     for name, cells in spec["submissions"].items():
         cells = [c.replace("GRADER_PID", str(os.getpid())) for c in cells]
         notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(c) for c in cells])
         nbformat.write(notebook, folder / f"{name}.ipynb")
-    options = GradingOptions(notebook_timeout=spec["timeout"])
+    options = GradingOptions(notebook_timeout=spec["timeout"],
+                             policy=IsolationPolicy(pid_namespace=spec["pid_namespace"]))
     with Grader(load_assignment(assignment), options) as grader:
         result = grader.grade(folder / f"{spec['grade']}.ipynb", out_dir=out / spec["grade"])
     print(json.dumps({"outcome": result.outcome, "stdout": result.stdout,
@@ -74,27 +75,26 @@ RUNNER = textwrap.dedent("""
 # ------------------------------------------------------------------ the grader, as whom
 
 
-def _as_ordinary_user() -> None:  # runs in the forked child, before exec
-    libc = ctypes.CDLL(None, use_errno=True)
-    cap = 2  # CAP_DAC_READ_SEARCH
-
-    class Header(ctypes.Structure):
-        _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
-
-    class Data(ctypes.Structure):
-        _fields_ = [("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32),
-                    ("inheritable", ctypes.c_uint32)]
-
-    libc.prctl(8, 1, 0, 0, 0)  # PR_SET_KEEPCAPS
-    os.setgroups([])
-    os.setresgid(ORDINARY_UID, ORDINARY_UID, ORDINARY_UID)
-    os.setresuid(ORDINARY_UID, ORDINARY_UID, ORDINARY_UID)
-    data = (Data * 2)()
-    data[0].effective = data[0].permitted = data[0].inheritable = 1 << cap
-    if libc.capset(ctypes.byref(Header(0x20080522, 0)), data) != 0:
-        raise OSError(ctypes.get_errno(), "capset")
-    if libc.prctl(47, 2, cap, 0, 0) != 0:  # PR_CAP_AMBIENT, PR_CAP_AMBIENT_RAISE
-        raise OSError(ctypes.get_errno(), "PR_CAP_AMBIENT_RAISE")
+@pytest.fixture(scope="module")
+def user_env() -> Iterator[envs.Env]:
+    """Debian's Python in a venv of an ordinary user holding the worker's libraries; the
+    engine itself comes from this checkout (``PYTHONPATH``), as for root."""
+    why = envs.can_switch_users()
+    if why is not None:
+        pytest.skip(f"the ordinary-user grader cannot run: {why}")
+    user = envs.ordinary_user()
+    ready = Path(envs.home(user)) / "numgrade-venv" / "bin" / "python"  # made by an earlier run
+    probe = envs.Env(ready, user).command("python", "-c", "import " + ", ".join(NEEDED))
+    if ready.exists() and subprocess.run(probe, capture_output=True).returncode == 0:
+        yield envs.Env(ready, user)
+        return
+    top = envs.shared_tempdir("numgrade-confinement-venv-")
+    envs.give_to(user, top)
+    try:
+        yield envs.make_venv(top / "venv", install=list(PACKAGES), python="/usr/bin/python3",
+                             user=user)
+    finally:
+        shutil.rmtree(top, ignore_errors=True)
 
 
 @pytest.fixture(params=IDENTITIES)
@@ -103,9 +103,16 @@ def identity(request: pytest.FixtureRequest) -> str:
 
 
 @pytest.fixture
+def who(identity: str, request: pytest.FixtureRequest) -> dict[str, Any]:
+    """``grade``'s identity arguments: root (or whoever runs the tests), or the ordinary user."""
+    return {"identity": identity,
+            "user_env": request.getfixturevalue("user_env") if identity == "user" else None}
+
+
+@pytest.fixture
 def place() -> Iterator[Path]:
     """A folder another user may enter (pytest's own is mode 700 as root)."""
-    top = shared_tempdir("numgrade-confinement-")
+    top = envs.shared_tempdir("numgrade-confinement-")
     try:
         yield top
     finally:
@@ -113,24 +120,26 @@ def place() -> Iterator[Path]:
 
 
 def grade(place: Path, identity: str, submissions: dict[str, list[str]], name: str,
-          *, timeout: float) -> dict[str, Any]:
+          *, timeout: float, user_env: envs.Env | None = None,
+          pid_namespace: bool = True) -> dict[str, Any]:
     """Grade ``submissions[name]`` (the others lie beside it) in a grader process."""
     assignment = write_double(place, "double", {"test_double.py": CHECK})
     folder, out, tmp = place / "submissions", place / "results", place / "tmp"
     for path in (folder, out, tmp):
         path.mkdir()
     tmp.chmod(0o700)
+    spec = json.dumps({"submissions": submissions, "grade": name, "timeout": timeout,
+                       "pid_namespace": pid_namespace})
+    args = ["-c", RUNNER, spec, str(assignment), str(folder), str(out)]
+    env = {"PYTHONPATH": str(REPO), "TMPDIR": str(tmp)}
     if identity == "user":
-        for path in (out, tmp):
-            os.chown(path, ORDINARY_UID, ORDINARY_UID)
-        folder.chmod(0o777)
-    env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(REPO), "TMPDIR": str(tmp),
-           "HOME": str(tmp)}
-    spec = json.dumps({"submissions": submissions, "grade": name, "timeout": timeout})
-    proc = subprocess.run(
-        [sys.executable, "-c", RUNNER, spec, str(assignment), str(folder), str(out)],
-        env=env, capture_output=True, text=True, timeout=GRADER_TIMEOUT, cwd=place,
-        preexec_fn=_as_ordinary_user if identity == "user" else None)
+        assert user_env is not None and user_env.user is not None
+        for path in (folder, out, tmp):
+            shutil.chown(path, user_env.user, user_env.user)
+        proc = user_env.run("python", *args, cwd=place, timeout=GRADER_TIMEOUT, env=env)
+    else:
+        proc = subprocess.run([sys.executable, *args], env={"PATH": "/usr/bin:/bin", **env},
+                              capture_output=True, text=True, timeout=GRADER_TIMEOUT, cwd=place)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
     return result
@@ -182,8 +191,8 @@ ENDLESS = BURNER + "k = 0\nwhile True:\n    burn(k, 0.2)\n    k += 1\n"
 LIMIT = 3.0
 
 
-def test_cpu_of_short_lived_orphans_is_recorded(place: Path, identity: str) -> None:
-    result = grade(place, identity, {"burns": [COUNTED, RIGHT]}, "burns", timeout=60)
+def test_cpu_of_short_lived_orphans_is_recorded(place: Path, who: dict[str, Any]) -> None:
+    result = grade(place, submissions={"burns": [COUNTED, RIGHT]}, name="burns", timeout=60, **who)
     assert result["outcome"] == "graded", result
     burned = float(result["stdout"].split("burned=")[1].split()[0])
     ran = float(result["stdout"].split("ran=")[1].split()[0])
@@ -195,8 +204,23 @@ def test_cpu_of_short_lived_orphans_is_recorded(place: Path, identity: str) -> N
     assert result["cpu"] >= burned, (result["cpu"], burned)
 
 
-def test_the_cpu_limit_stops_work_done_in_short_lived_orphans(place: Path, identity: str) -> None:
-    result = grade(place, identity, {"endless": [ENDLESS, RIGHT]}, "endless", timeout=LIMIT)
+def test_cpu_of_orphans_reaped_by_the_warm_parent_is_recorded(place: Path,
+                                                              who: dict[str, Any]) -> None:
+    """Without a PID namespace the orphans land on the warm parent (the subreaper), which
+    reaps them: their time is counted from its reaped children's."""
+    result = grade(place, submissions={"burns": [COUNTED, RIGHT]}, name="burns", timeout=60,
+                   pid_namespace=False, **who)
+    assert result["outcome"] == "graded", result
+    assert note_with(result, "PID namespace:") is None
+    burned = float(result["stdout"].split("burned=")[1].split()[0])
+    # Forks and exits add a little (under 5% where the notebook could measure them).
+    assert burned <= result["cpu"] <= 1.1 * burned, (result["cpu"], burned)
+
+
+def test_the_cpu_limit_stops_work_done_in_short_lived_orphans(place: Path,
+                                                               who: dict[str, Any]) -> None:
+    result = grade(place, submissions={"endless": [ENDLESS, RIGHT]}, name="endless",
+                   timeout=LIMIT, **who)
     assert result["outcome"] == "timeout", result
     # Stopped at the limit, not at the wall-clock backstop (4 x the limit + 15 s): what
     # was recorded is the limit's worth, plus one reading's overshoot and the second cell.
@@ -250,11 +274,11 @@ LOOK = textwrap.dedent("""
 CLASSMATE = "def double(x):\n    return x + x  # the classmate's secret way\n"
 
 
-def test_nothing_of_the_class_is_visible(place: Path, identity: str) -> None:
+def test_nothing_of_the_class_is_visible(place: Path, who: dict[str, Any]) -> None:
     look = (LOOK.replace("SUBMISSIONS", str(place / "submissions"))
             .replace("RESULTS", str(place / "results")))
-    result = grade(place, identity, {"classmate": [CLASSMATE], "looker": [look, RIGHT]},
-                   "looker", timeout=60)
+    result = grade(place, submissions={"classmate": [CLASSMATE], "looker": [look, RIGHT]},
+                   name="looker", timeout=60, **who)
     assert result["outcome"] == "graded", result
     found = json.loads(result["stdout"].split("FOUND=")[1].splitlines()[0])
     missing = note_with(result, "visible to the submission")
