@@ -26,6 +26,7 @@ new program, which would throw away the warm interpreter.
 from __future__ import annotations
 
 import os
+import resource
 import signal
 
 from autograder.sandbox import kernel
@@ -50,7 +51,7 @@ def split_off_init() -> None:
 
     Call right after ``unshare(CLONE_NEWPID)`` in the single-threaded child. The
     caller becomes the relay (see the module's docstring) and exits when the first
-    process ends, with its exit status (128 + the signal, if it was killed).
+    process ends, with its exit status (killed by the same signal, if it was).
     """
     parent = os.getppid()
     pid = os.fork()
@@ -79,6 +80,11 @@ def _relay(child: int, parent: int) -> int:
         except ChildProcessError:
             return LOST
         code = os.waitstatus_to_exitcode(status)
+        if code < 0:  # killed: end the same way, so the warm parent sees what happened
+            resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+            if -code != signal.SIGKILL:
+                signal.signal(-code, signal.SIG_DFL)
+            os.kill(os.getpid(), -code)
         return code if code >= 0 else 128 - code
 
 
