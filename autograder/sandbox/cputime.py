@@ -66,6 +66,17 @@ def _reaped_of(raw: bytes | None) -> float:
     return (int(fields[13]) + int(fields[14])) / _TICKS if len(fields) > 14 else 0.0
 
 
+def _leads_namespace(pid: int) -> bool:
+    """Whether ``pid`` is process 1 of a PID namespace of its own (``NSpid`` ends in 1)."""
+    try:
+        with open(f"/proc/{pid}/status", "rb") as handle:
+            lines = handle.read().split(b"\n")
+    except OSError:
+        return False
+    found = [line.split()[1:] for line in lines if line.startswith(b"NSpid:")]
+    return bool(found) and len(found[0]) > 1 and found[0][-1] == b"1"
+
+
 def _queued_of(raw: bytes | None) -> float:
     """Run-queue wait of a main thread from its ``/proc/<pid>/schedstat`` (field 2); 0.0 if unknown."""
     try:
@@ -249,8 +260,8 @@ class CpuClock:
         PID namespace when the child is the relay that waits for it."""
         if self._init is None:
             children = self._children(self.pid)
-            if len(children) != 1:  # not forked yet (or no relay): the child itself, for now
-                return _queued_of(self._schedstat.read())
+            if len(children) != 1 or not _leads_namespace(children[0]):
+                return _queued_of(self._schedstat.read())  # no relay, or not forked yet
             self._init = self._file(f"/proc/{children[0]}/schedstat")
         return _queued_of(self._init.read())
 
