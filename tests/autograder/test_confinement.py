@@ -215,8 +215,10 @@ def test_cpu_of_orphans_reaped_by_the_warm_parent_is_recorded(place: Path,
     assert result["outcome"] == "graded", result
     assert note_with(result, "PID namespace:") is None
     burned = float(result["stdout"].split("burned=")[1].split()[0])
-    # Forks and exits add a little (under 5% where the notebook could measure them).
-    assert burned <= result["cpu"] <= 1.1 * burned, (result["cpu"], burned)
+    # Forks and exits add a little: under 5% where the notebook can measure them (in a
+    # PID namespace), up to 15% here (measured: 4.15 s for 3.62 s burned; uncounted,
+    # as before this test, 0.37 s).
+    assert burned <= result["cpu"] <= 1.2 * burned, (result["cpu"], burned)
 
 
 def test_the_cpu_limit_stops_work_done_in_short_lived_orphans(place: Path,
