@@ -190,6 +190,8 @@ class Grader:
         #: the checks, collected once and run for every submission, and the
         #: assignment digest they were collected at (a new session when it changes)
         self._checks: CheckSuite | None = None
+        #: the submission being graded (its folder is hidden from the worker)
+        self._source: Path | None = None
         self._checks_digest = ""
         self._slot = started_slot if started_slot is not None else GradingSlot(slot=slot, scratch=scratch)
 
@@ -245,6 +247,7 @@ class Grader:
         digest = assignment_digest(self.assignment)
         key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
         seed = submission_seed(self.assignment, sub_id)
+        self._source = Path(path)  # its folder holds other submissions: see _excluded_paths
         # -- intake: a notebook, folder or zip -> its files (engine/submission.py), and
         # whether the notebook is this assignment's (engine/identify.py)
         with tempfile.TemporaryDirectory(prefix="numgrade-submission-") as scratch:
@@ -370,10 +373,13 @@ class Grader:
         return [(p, str(p.relative_to(root))) for p in self.assignment.data_files]
 
     def _excluded_paths(self, out_dir: Path | None = None) -> list[Path]:
-        """Trees the worker must never read: the assignment, the grader, other results."""
+        """Trees the worker must never read: the assignment, the grader, other results,
+        the folder of the submission being graded (the batch's other submissions)."""
         roots = {self.assignment.root.resolve(), self.assignment.root.resolve().parent}
         if out_dir is not None:  # the batch's result folder: every student's results
             roots.add(out_dir.resolve().parent)
+        if self._source is not None:
+            roots.add(self._source.resolve().parent)
         roots.update(forbidden_module_paths(self.assignment.rules))
         package = Path(autograder.__file__).resolve().parent
         roots.add(package)

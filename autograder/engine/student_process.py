@@ -37,7 +37,7 @@ from autograder.errors import (
     WorkerCrashed,
 )
 from autograder.sandbox.policy import IsolationPolicy
-from autograder.sandbox.cputime import CpuClock
+from autograder.sandbox.cputime import CpuClock, slot_clock
 from autograder.sandbox.reaper import child_pidfd, kill_child, sweep_slot
 
 #: how many cells that hang or kill the worker are skipped before giving up on a notebook
@@ -258,7 +258,7 @@ class StudentProcess:
             request["workroot"] = str(self.slot.work_root)
         self._pid, self._sock = self.slot.spawn(request)
         self._pidfd = child_pidfd(self._pid, self.slot.warm_parent)
-        self._clock = CpuClock(self._pid)
+        self._clock = slot_clock(self._pid, self.policy, self.slot.slot, self.slot.warm_parent)
 
     def _await(self, cpu_limit: float, wall_deadline: float) -> Any:
         """The child's next message; TimeoutError once it used ``cpu_limit`` CPU seconds

@@ -6,12 +6,14 @@ Every process a submission starts stays in its slot's cgroup, whatever it does
 * give each slot the same CPU weight: 48 busy processes of one submission share one
   slot's weight and cannot starve the honest submission on the other slot;
 * cap the slot's processes (``pids.max``), a second bound besides ``RLIMIT_NPROC``;
+* count the CPU time of everything that ran in it, processes that lived a
+  millisecond included (``cpu.stat`` or ``cpuacct.usage``, see :mod:`autograder.sandbox.cputime`);
 * kill everything in it, including processes that re-fork faster than a sweep
   through ``/proc``: ``cgroup.kill`` (cgroup v2), or freeze, kill, thaw (v1 freezer).
 
 Where it applies: root, with the cgroup v2 ``cpu`` and ``pids`` controllers on the
-unified hierarchy, or else with the v1 ``cpu`` (and, if mounted, ``pids`` and
-``freezer``) hierarchies. An ordinary user gets none (a delegated v2 subtree would
+unified hierarchy, or else with the v1 ``cpu`` (and, if mounted, ``pids``, ``cpuacct``
+and ``freezer``) hierarchies. An ordinary user gets none (a delegated v2 subtree would
 need the grader itself moved into a leaf first), and the grader says so once.
 
 Why by hand: the cgroup file system *is* the interface (a few ``mkdir`` and
@@ -60,11 +62,17 @@ class SlotCgroup:
         The slot's directory in each hierarchy; the first one lists the processes.
     freezer : Path or None
         The v1 freezer directory, when that hierarchy is mounted.
+    usage : Path or None
+        The file counting the CPU time of every process that ever ran in the slot,
+        exited ones included: ``cpu.stat`` (v2, ``usage_usec``) or ``cpuacct.usage``
+        (v1, nanoseconds; its hierarchy's directory is one of ``dirs``); None when
+        v1 has no ``cpuacct`` hierarchy.
     """
 
     version: int
     dirs: tuple[Path, ...]
     freezer: Path | None = None
+    usage: Path | None = None
 
     def join(self) -> None:
         """Move the calling process (and so everything it will start) into the slot."""
@@ -78,6 +86,15 @@ class SlotCgroup:
         except OSError:
             return set()
         return {int(line) for line in text.split()}
+
+    def cpu_seconds(self) -> float | None:
+        """CPU seconds the slot's processes used so far (None when it cannot be read)."""
+        if self.usage is None:
+            return None
+        try:
+            return parse_usage(self.usage.read_bytes(), self.version)
+        except OSError:
+            return None
 
     def kill_all(self, *, killed: dict[int, int] | None = None) -> bool:
         """Kill every process of the slot; True when none is left.
@@ -141,6 +158,19 @@ class SlotCgroup:
         (self.freezer / "freezer.state").write_text("THAWED")  # type: ignore[operator]
 
 
+def parse_usage(raw: bytes, version: int) -> float | None:
+    """CPU seconds from the text of ``cpu.stat`` (v2) or ``cpuacct.usage`` (v1)."""
+    try:
+        if version == 1:
+            return int(raw.split()[0]) / 1e9
+        for line in raw.split(b"\n"):
+            if line.startswith(b"usage_usec "):
+                return int(line.split()[1]) / 1e6
+    except (IndexError, ValueError):
+        pass
+    return None
+
+
 def _wait_for_exit(killed: dict[int, int], listed: set[int], exited: set[int],
                    pause: float) -> None:
     """Wait until a listed process exits, or ``pause`` seconds.
@@ -184,11 +214,13 @@ def slot_cgroup(slot: int, *, processes: int, create: bool = True) -> SlotCgroup
     layout = _layout()
     if layout is None:
         return None
-    version, roots, freezer_root = layout
+    version, roots, freezer_root, usage_root = layout
     name = f"slot-{slot}"
     dirs = tuple(root / GROUP / name for root in roots)
     freezer = freezer_root / GROUP / name if freezer_root is not None else None
-    group = SlotCgroup(version, dirs, freezer)
+    usage = (None if usage_root is None else
+             usage_root / GROUP / name / ("cpu.stat" if version == 2 else "cpuacct.usage"))
+    group = SlotCgroup(version, dirs, freezer, usage)
     if create and _CREATED.get(group) != processes:
         try:
             _create(group, processes)
@@ -235,19 +267,21 @@ def _enable_controllers(directory: Path) -> None:
 
 
 @functools.cache
-def _layout() -> tuple[int, tuple[Path, ...], Path | None] | None:
-    """(version, roots listing processes first, v1 freezer root) usable here, or None."""
+def _layout() -> tuple[int, tuple[Path, ...], Path | None, Path | None] | None:
+    """(version, roots listing processes first, v1 freezer root, root of the CPU usage
+    file) usable here, or None."""
     if os.geteuid() != 0:
         return None
     mounts = _cgroup_mounts()
     v2 = mounts.get("cgroup2")
     if v2 is not None and {"cpu", "pids"} <= _controllers(v2):
-        return 2, (v2,), None
+        return 2, (v2,), None, v2
     cpu = mounts.get("cpu")
     if cpu is None:
         return None
-    roots = [cpu] + [mounts[c] for c in ("pids",) if c in mounts and mounts[c] != cpu]
-    return 1, tuple(roots), mounts.get("freezer")
+    # cpuacct's folder is joined like the others: its cpuacct.usage counts the slot's CPU.
+    roots = [cpu] + [mounts[c] for c in ("pids", "cpuacct") if c in mounts]
+    return 1, tuple(dict.fromkeys(roots)), mounts.get("freezer"), mounts.get("cpuacct")
 
 
 def _controllers(root: Path) -> set[str]:
@@ -287,6 +321,6 @@ def cgroup_support() -> str:
             return ("Not running as root: no cgroup per slot, so one submission's busy "
                     "processes can slow the other slots (CPU-time limits still hold).")
         return "No usable cgroup hierarchy (cpu controller): slots share the CPU unweighted."
-    version, roots, freezer = layout
+    version, roots, freezer, _ = layout
     kill = "cgroup.kill" if version == 2 else ("freezer" if freezer else "repeated sweeps")
     return f"cgroup v{version} per slot: equal CPU weight, pids.max, kill by {kill}."

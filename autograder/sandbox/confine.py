@@ -4,7 +4,8 @@ The warm worker ("zygote") imports numpy, scipy, matplotlib and IPython once and
 then ``os.fork()``s one child per submission. The child calls :func:`enter_sandbox`,
 which, in this order:
 
-1. starts a new session, so the grader can ``killpg`` the child and everything it forks;
+1. starts a new session, so the grader can ``killpg`` the child and everything it forks,
+   and, as root, joins the slot's cgroup;
 2. replaces the environment (no tokens, no CI variables, not even in
    ``/proc/self/environ``) and moves into the submission's working directory;
 3. sets resource limits (address space, CPU, processes, open files, file size, core);
@@ -19,8 +20,10 @@ The environment is built in :mod:`autograder.sandbox.environment`, the Landlock
 ruleset in :mod:`autograder.sandbox.landlock` (the warm parent builds it once, see
 :func:`autograder.sandbox.landlock.shared_landlock`). Steps of
 :mod:`autograder.sandbox.seccomp` come in between: right after the new session,
-private IPC, UTS and mount namespaces (as an ordinary user inside a user namespace)
-with a size-limited tmpfs over the working directory; just before Landlock, a
+private IPC, UTS, mount and PID namespaces (as an ordinary user inside a user
+namespace; the PID namespace needs one more fork, after which only the namespace's
+first process goes on, see :mod:`autograder.sandbox.pidns`) with a size-limited
+tmpfs over the working directory and ``/proc`` remounted; just before Landlock, a
 seccomp filter (no new socket of any family, no keyrings, memfd or io_uring; no
 System V IPC where there is no IPC namespace).
 
@@ -35,11 +38,12 @@ Already-open file descriptors (the socket to the grader, the pipes for output) k
 working: neither Landlock nor the user switch affects them.
 
 Without the user switch (not root, or ``drop_user=False``) the child shares the
-grader's uid, and Landlock does not stop it from reading ``/proc/<pid>/environ`` of
-the grader's processes (it blocks ptrace attach and ``/proc/<pid>/mem`` only). Start
-the grader's processes with a clean environment, or make them non-dumpable
-(``prctl(PR_SET_DUMPABLE, 0)``), in that setting. Command lines in
-``/proc/<pid>/cmdline`` are readable by every user, as always on Linux.
+grader's uid; without a PID namespace as well, Landlock does not stop it from reading
+``/proc/<pid>/environ`` of the grader's processes (it blocks ptrace attach and
+``/proc/<pid>/mem`` only). Start the grader's processes with a clean environment, or
+make them non-dumpable (``prctl(PR_SET_DUMPABLE, 0)``), in that setting. Without a
+PID namespace, command lines in ``/proc/<pid>/cmdline`` are readable by every user,
+as always on Linux.
 """
 
 from __future__ import annotations
@@ -53,7 +57,8 @@ from pathlib import Path
 from autograder.errors import UsageError
 from autograder.sandbox import cgroups, kernel, seccomp
 from autograder.sandbox.environment import clean_environment, replace_environment
-from autograder.sandbox.landlock import SharedLandlock, prepare_landlock, restrict, write_layer
+from autograder.sandbox.landlock import (SharedLandlock, allow_own_proc, prepare_landlock, restrict,
+                                         write_layer)
 from autograder.sandbox.policy import IsolationPolicy, Limits
 from autograder.sandbox.readable import coverable_folders
 
@@ -128,6 +133,10 @@ def enter_sandbox(
     workdir = _check_arguments(policy, workdir, slot)
     notes: list[str] = []
     _attempt(notes, "new session", os.setsid)
+    # Both before the namespaces: the cgroup is joined while the slot's folders can be
+    # reached, and the user's processes are counted while /proc shows them all.
+    _join_cgroup(policy, slot, notes)
+    processes = _process_allowance(policy)
     private_ipc = _apply_namespaces(policy, workdir, exclude, notes)
     notes.append(replace_environment(clean_environment(workdir)))
     os.chdir(workdir)
@@ -135,10 +144,11 @@ def enter_sandbox(
         notes.extend(shared.notes)
         ruleset = shared.ruleset
         writes = None if ruleset is None else write_layer(workdir, notes)
+        if ruleset is not None and policy.namespaces and policy.pid_namespace:
+            allow_own_proc(ruleset)
     else:
         ruleset, writes = prepare_landlock(policy, workdir, exclude, notes), None
-    notes.append(_apply_limits(policy.limits, _process_allowance(policy)))
-    _join_cgroup(policy, slot, notes)
+    notes.append(_apply_limits(policy.limits, processes))
     _apply_identity(policy, workdir, policy.base_uid + slot, notes)
     if policy.seccomp:
         _attempt(notes, "seccomp", lambda: seccomp.install_filter(block_sysv_ipc=not private_ipc))
@@ -176,19 +186,19 @@ def _attempt(notes: list[str], label: str, step: Callable[[], str | None]) -> No
 
 def _apply_namespaces(policy: IsolationPolicy, workdir: Path, exclude: Sequence[Path],
                       notes: list[str]) -> bool:
-    """Private IPC/UTS/mount namespaces and the disk quota; True if IPC is private.
+    """Private IPC/UTS/mount (and PID) namespaces and the disk quota; True if IPC is private.
 
     An ordinary user also gets an empty network namespace here, inside the same
     user namespace (root gets one in :func:`_apply_identity`). Excluded folders
     that hold nothing the child needs are covered by empty mounts.
     """
     if not policy.namespaces:
-        notes.append("IPC/mount namespaces and disk quota off by policy")
+        notes.append("IPC/mount/PID namespaces and disk quota off by policy")
         return False
     result = seccomp.private_namespaces(
         workdir, quota_bytes=policy.limits.disk_bytes,
         network=policy.network_namespace and os.geteuid() != 0,
-        hide=coverable_folders(exclude, workdir, policy))
+        hide=coverable_folders(exclude, workdir, policy), pid=policy.pid_namespace)
     notes.extend(result.notes)
     return result.ipc
 

@@ -1,13 +1,23 @@
-"""CPU time used by a sandboxed child and the processes of its session.
+"""CPU time used by a sandboxed child and everything it started.
 
 Time limits on student code are CPU limits: a submission gets the same verdict
-on an idle laptop and on a grading server whose cores are all busy. The clock
-reads ``/proc/<pid>/stat`` (user + system time of the process and of the
-children it has reaped) and, only when a wait lasts long enough to matter, the
-other processes of the child's session (the child called ``setsid``, so its
-pid is the session id of everything it starts, unless a process starts a
-session of its own, which the wall-clock backstop and the slot's user sweep
-still catch).
+on an idle laptop and on a grading server whose cores are all busy. A submission
+may do its work in processes that live a millisecond, between two readings of
+the clock, so the clock counts time that has already been *accounted* somewhere
+rather than only what it sees running:
+
+* as root, the slot's cgroup (``cpu.stat`` ``usage_usec`` on cgroup v2,
+  ``cpuacct.usage`` on v1) counts every process that ever ran in it, exited ones
+  included; the child joins the cgroup before any student code runs, and only root
+  can move a process out;
+* otherwise the clock adds up ``/proc/<pid>/stat`` (user + system time of a process
+  and of the children it has reaped) of the child, of every process of its session
+  (the child called ``setsid`` and seccomp forbids leaving the session; zombies
+  still hold their time), and the reaped children's time of the warm parent, which
+  is the child subreaper: a process whose parent exited is re-parented to it (or to
+  the init of the child's PID namespace, a process of the session) and its time
+  lands there once it is reaped. An exited process's time is thus always in one
+  place: its zombie, or the process that reaped it.
 
 Why by hand: ``psutil`` would do the same reading of ``/proc`` but is not a
 dependency of the engine, and ``resource.getrusage`` only sees reaped children
@@ -19,7 +29,10 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
-__all__ = ["CpuClock", "process_cpu_seconds", "session_cpu_seconds"]
+from autograder.sandbox import cgroups
+from autograder.sandbox.policy import IsolationPolicy
+
+__all__ = ["CpuClock", "process_cpu_seconds", "session_cpu_seconds", "slot_clock"]
 
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -43,6 +56,25 @@ def _cpu_of(fields: list[str] | None) -> float:
         return 0.0
     # fields[0] is field 3 of proc(5): utime, stime, cutime, cstime are fields 14-17.
     return sum(int(fields[i]) for i in range(11, 15)) / _TICKS
+
+
+def _reaped_of(raw: bytes | None) -> float:
+    """Time of the reaped children (cutime + cstime) in a raw ``stat``; 0.0 if unknown."""
+    if raw is None:
+        return 0.0
+    fields = _split_stat(raw)
+    return (int(fields[13]) + int(fields[14])) / _TICKS if len(fields) > 14 else 0.0
+
+
+def _leads_namespace(pid: int) -> bool:
+    """Whether ``pid`` is process 1 of a PID namespace of its own (``NSpid`` ends in 1)."""
+    try:
+        with open(f"/proc/{pid}/status", "rb") as handle:
+            lines = handle.read().split(b"\n")
+    except OSError:
+        return False
+    found = [line.split()[1:] for line in lines if line.startswith(b"NSpid:")]
+    return bool(found) and len(found[0]) > 1 and found[0][-1] == b"1"
 
 
 def _queued_of(raw: bytes | None) -> float:
@@ -109,40 +141,108 @@ def session_cpu_seconds(sid: int, *, exclude: int | None = None) -> dict[int, fl
     return found
 
 
+#: readings of /proc a total may take when a process is reaped during one (then a
+#: reaped process may have been counted twice, or not at all)
+_TRIES = 3
+
+
 @dataclass
 class CpuClock:
-    """CPU seconds a child's session spent since :meth:`start`.
+    """CPU seconds a child and everything it started spent since :meth:`start`.
 
-    The child's own time is read at every :meth:`start` (one small file, kept
-    open until :meth:`close`); the rest of its session is scanned only from
-    :meth:`used`, and each other process is charged only for the time it spent
-    since it was last charged, so a process left running by the notebook is
-    charged to the call during which it runs.
+    ``usage`` is the slot cgroup's usage file (as root); without it the clock adds
+    up ``/proc`` as the module says, with ``reaper`` the warm parent. :meth:`own` is
+    the cheap reading for the end of every call: the child's files, kept open, and a
+    scan of ``/proc`` only when the child, its PID namespace's init or the warm
+    parent has a child of its own to count; :meth:`used` always scans. Totals never
+    go down, so a process counted in one reading is not lost by the next.
     """
 
     pid: int
+    reaper: int | None = None
+    usage: cgroups.SlotCgroup | None = None
     _start: float = 0.0
     _queued_start: float = 0.0
-    _others: float = 0.0
-    _charged: dict[int, float] = field(default_factory=dict)
     _stat: _ProcFile = field(init=False)
     _schedstat: _ProcFile = field(init=False)
-    #: the child's own total at the last reading (see :meth:`start`)
+    _files: dict[str, _ProcFile] = field(init=False, default_factory=dict)
+    #: the total at the last reading (see :meth:`start`)
     _last: float | None = None
+    #: the highest total read so far
+    _high: float = 0.0
+    _closed: bool = False
+    #: the schedstat file :meth:`queued` reads, once known
+    _init: _ProcFile | None = None
 
     def __post_init__(self) -> None:
         self._stat = _ProcFile(f"/proc/{self.pid}/stat")
         self._schedstat = _ProcFile(f"/proc/{self.pid}/schedstat")
+        if self.usage is not None and self.usage.cpu_seconds() is None:
+            self.usage = None  # no usage file: /proc, as for an ordinary user
 
     def close(self) -> None:
-        """Close the child's files (the clock reads 0.0 of a process after this)."""
-        self._stat.close()
-        self._schedstat.close()
+        """Close the child's files; the clock then keeps its last reading."""
+        self._closed = True
+        for handle in (self._stat, self._schedstat, *self._files.values()):
+            handle.close()
 
-    def _own_total(self) -> float:
+    def _file(self, path: str) -> _ProcFile:
+        handle = self._files.get(path)
+        if handle is None:
+            handle = self._files[path] = _ProcFile(path)
+            if self._closed:
+                handle.close()
+        return handle
+
+    def _children(self, pid: int) -> list[int]:
+        raw = self._file(f"/proc/{pid}/task/{pid}/children").read()
+        return [int(n) for n in raw.split()] if raw else []
+
+    def _total(self, *, scan: bool) -> float:
+        if self._closed:
+            total = None
+        elif self.usage is not None:
+            total = self.usage.cpu_seconds()
+        else:
+            total = self._proc_total(scan)
+        if total is not None:
+            self._high = max(self._high, total)
+        self._last = self._high
+        return self._high
+
+    def _proc_total(self, scan: bool) -> float | None:
         raw = self._stat.read()
-        self._last = _cpu_of(None if raw is None else _split_stat(raw))
-        return self._last
+        if raw is None and self._last is None:
+            return 0.0
+        for _ in range(_TRIES):
+            fixed, reaped = self._fixed()
+            others = self._others(scan)
+            if self._fixed()[1] == reaped:  # nothing was reaped meanwhile
+                break
+        return fixed + others
+
+    def _fixed(self) -> tuple[float, float]:
+        """(time of the child and the warm parent's reaped children, the reaped part)."""
+        raw = self._stat.read()
+        reaped = _reaped_of(raw)
+        own = _cpu_of(None if raw is None else _split_stat(raw))
+        if self.reaper is not None:
+            reaper = _reaped_of(self._file(f"/proc/{self.reaper}/stat").read())
+            own, reaped = own + reaper, reaped + reaper
+        return own, reaped
+
+    def _others(self, scan: bool) -> float:
+        """Time of the other processes of the child's session."""
+        children = self._children(self.pid)
+        adopted = [] if self.reaper is None else [
+            p for p in self._children(self.reaper) if p != self.pid]
+        if not scan and not adopted and len(children) <= 1:
+            if not children:
+                return 0.0
+            init = children[0]  # the child's PID namespace's init, or its one child
+            if not self._children(init):
+                return _cpu_of(_split_stat(self._file(f"/proc/{init}/stat").read() or b")"))
+        return sum(session_cpu_seconds(self.pid, exclude=self.pid).values())
 
     def start(self) -> None:
         """Start counting from now: from the last reading, when there was one.
@@ -152,9 +252,18 @@ class CpuClock:
         sending its answer and waiting again, is counted with the next call rather
         than not at all), and one read of ``/proc`` per call is saved.
         """
-        self._start = self._last if self._last is not None else self._own_total()
-        self._queued_start = _queued_of(self._schedstat.read())
-        self._others = 0.0
+        self._start = self._last if self._last is not None else self._total(scan=True)
+        self._queued_start = self._queued()
+
+    def _queued(self) -> float:
+        """Run-queue wait of the student's first process: the child, or the init of its
+        PID namespace when the child is the relay that waits for it."""
+        if self._init is None:
+            children = self._children(self.pid)
+            if len(children) != 1 or not _leads_namespace(children[0]):
+                return _queued_of(self._schedstat.read())  # no relay, or not forked yet
+            self._init = self._file(f"/proc/{children[0]}/schedstat")
+        return _queued_of(self._init.read())
 
     def queued(self) -> float:
         """Seconds the child was runnable but waiting for a CPU since :meth:`start`.
@@ -162,16 +271,22 @@ class CpuClock:
         A busy machine makes this grow; the wall-clock backstop adds it back, so
         only time the child itself spent (computing, sleeping, blocking) counts.
         """
-        return max(0.0, _queued_of(self._schedstat.read()) - self._queued_start)
+        return max(0.0, self._queued() - self._queued_start)
 
     def own(self) -> float:
-        """The child's own CPU seconds since :meth:`start` (cheap)."""
-        return max(0.0, self._own_total() - self._start)
+        """CPU seconds of the child and what it started since :meth:`start` (cheap)."""
+        return max(0.0, self._total(scan=False) - self._start)
 
     def used(self) -> float:
-        """CPU seconds of the child and its session since :meth:`start`."""
-        for pid, seconds in session_cpu_seconds(self.pid, exclude=self.pid).items():
-            before = self._charged.get(pid, 0.0)
-            self._charged[pid] = seconds
-            self._others += max(0.0, seconds - before)
-        return self.own() + self._others
+        """CPU seconds of the child and what it started since :meth:`start`."""
+        return max(0.0, self._total(scan=True) - self._start)
+
+
+def slot_clock(pid: int, policy: IsolationPolicy, slot: int, reaper: int | None) -> CpuClock:
+    """The clock of the child ``pid`` of the warm parent ``reaper`` on worker slot ``slot``.
+
+    As root with a slot cgroup, the cgroup's usage counts; otherwise ``/proc``.
+    """
+    group = (cgroups.slot_cgroup(slot, processes=policy.limits.processes, create=False)
+             if policy.cgroup and os.geteuid() == 0 else None)
+    return CpuClock(pid, reaper=reaper, usage=group)

@@ -1,6 +1,6 @@
 """The system calls the sandbox needs that Python 3.11 does not offer, through :mod:`ctypes`.
 
-``unshare``, ``setns``, ``prctl`` and ``capset`` (``os.unshare`` and ``os.setns``
+``unshare``, ``setns``, ``mount``, ``prctl`` and ``capset`` (``os.unshare`` and ``os.setns``
 came in Python 3.12; the other two are not in :mod:`os` at all), the C library
 they are called through, and the flags of ``<sched.h>`` they take. Each call
 raises :class:`OSError` with the system's message when the kernel refuses it.
@@ -13,7 +13,7 @@ import functools
 import os
 
 __all__ = ["CLONE_NEWIPC", "CLONE_NEWNET", "CLONE_NEWNS", "CLONE_NEWUSER", "CLONE_NEWUTS",
-           "capset", "check", "libc", "prctl", "setns", "unshare"]
+           "capset", "check", "libc", "mount", "prctl", "setns", "unshare"]
 
 # <sched.h>: flags of unshare(2) and setns(2). CLONE_NEWNET makes a new, empty
 # network namespace (only ``lo``, down).
@@ -60,6 +60,18 @@ def unshare(flags: int) -> None:
 def setns(fd: int, kind: int) -> None:
     # Python 3.11 has no os.setns (added in 3.12).
     check("setns", libc().setns(fd, kind))
+
+
+def mount(source: str | None, target: str, fstype: str | None, flags: int,
+          data: str | None) -> None:
+    # Python has no os.mount.
+    def c_str(text: str | None) -> bytes | None:
+        return None if text is None else os.fsencode(text)
+
+    call = libc().mount
+    call.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p, ctypes.c_ulong,
+                     ctypes.c_char_p]
+    check("mount", call(c_str(source), c_str(target), c_str(fstype), flags, c_str(data)))
 
 
 def prctl(option: int, arg: int) -> None:

@@ -27,7 +27,7 @@ try:  # Landlock is Linux-only; elsewhere the sandbox notes its absence.
 except ImportError:  # pragma: no cover - landlockpy is a Linux dependency
     landlockpy = None  # type: ignore[assignment]
 
-__all__ = ["SharedLandlock", "landlock_abi", "prepare_landlock", "restrict", "shared_landlock",
+__all__ = ["SharedLandlock", "allow_own_proc", "landlock_abi", "prepare_landlock", "restrict", "shared_landlock",
            "write_layer"]
 
 
@@ -108,6 +108,19 @@ def _landlock_key(policy: IsolationPolicy, work_root: Path,
 def _resolved_sorted(paths: tuple[str, ...]) -> tuple[str, ...]:
     # Cached: the warm parent resolves a request's exclusions, the child it forks reuses them.
     return tuple(sorted(str(Path(p).resolve()) for p in paths))
+
+
+def allow_own_proc(ruleset: Ruleset) -> None:
+    """Let the child read the ``/proc`` it mounted for its PID namespace.
+
+    The shared ruleset's rule for ``/proc`` names the warm parent's ``/proc``; a new
+    mount over it is another file system, which Landlock does not find under that
+    rule (it skips covered mount points). So the child adds a rule to the shared
+    ruleset before enforcing it. The ruleset is the warm parent's own object, which
+    thus keeps one rule per child for a ``/proc`` that is gone with the child's
+    namespace (about a hundred bytes each): it grants nothing anyone can reach.
+    """
+    _allow(ruleset, Path("/proc"), _READ_RIGHTS)
 
 
 def write_layer(workdir: Path, notes: list[str]) -> Ruleset | None:

@@ -76,6 +76,10 @@ class IsolationPolicy:
     namespaces : bool
         Private IPC, UTS and mount namespaces and the disk quota (as an ordinary
         user, inside a user namespace when the kernel allows one).
+    pid_namespace : bool
+        With ``namespaces``, a PID namespace of the child's own and ``/proc``
+        remounted for it, so no other process of the machine can be seen or named
+        (see :mod:`autograder.sandbox.pidns`).
     seccomp : bool
         Load the seccomp filter of :func:`autograder.sandbox.seccomp.install_filter`.
     cgroup : bool
@@ -90,6 +94,7 @@ class IsolationPolicy:
     base_uid: int = 61000
     allowed_read: tuple[str, ...] = ()
     namespaces: bool = True
+    pid_namespace: bool = True
     seccomp: bool = True
     cgroup: bool = True
 
@@ -98,8 +103,8 @@ class IsolationPolicy:
             raise UsageError(
                 f"`policy.limits` must be a `Limits`; got {type(self.limits).__name__}."
             )
-        for name in ("landlock", "network_namespace", "drop_user", "namespaces", "seccomp",
-                     "cgroup"):
+        for name in ("landlock", "network_namespace", "drop_user", "namespaces",
+                     "pid_namespace", "seccomp", "cgroup"):
             if not isinstance(getattr(self, name), bool):
                 value = getattr(self, name)
                 raise UsageError(f"`policy.{name}` must be True or False; got {value!r}.")

@@ -30,7 +30,6 @@ library in :mod:`autograder.sandbox.kernel`).
 
 from __future__ import annotations
 
-import ctypes
 import errno
 import functools
 import os
@@ -40,7 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from autograder.sandbox import kernel
+from autograder.sandbox import kernel, pidns
 from autograder.sandbox.kernel import (
     CLONE_NEWIPC,
     CLONE_NEWNET,
@@ -114,7 +113,7 @@ class NamespaceResult:
 
 
 def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False,
-                       hide: Sequence[Path] = ()) -> NamespaceResult:
+                       hide: Sequence[Path] = (), pid: bool = False) -> NamespaceResult:
     """Give the calling (single-threaded, forked) process private namespaces.
 
     As root: ``unshare(IPC | UTS | mount)``. As an ordinary user: the same inside a
@@ -136,6 +135,9 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
         namespace (the checks, the repository, other submissions): Landlock
         refuses reading them but not ``stat``, so without this a child could
         still learn which files exist there, their sizes and times.
+    pid : bool
+        Also a PID namespace, with ``/proc`` remounted for it: the caller forks its
+        first process, and only that one returns (see :mod:`autograder.sandbox.pidns`).
 
     Returns
     -------
@@ -144,19 +146,19 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
     """
     flags = CLONE_NEWIPC | CLONE_NEWUTS | CLONE_NEWNS | (CLONE_NEWNET if network else 0)
     is_root = os.geteuid() == 0
+    notes: list[str] = []
     try:
-        if is_root:
-            kernel.unshare(flags)
-        else:
-            _enter_user_namespace(flags)
+        pid = _unshare(flags, pid, notes)
     except OSError as exc:
         why = "" if is_root else " (user namespaces refused for this user)"
         return NamespaceResult(False, 0, (
             f"IPC/mount namespaces skipped{why}: {exc.strerror or exc}; System V IPC "
             "and message queues blocked by seccomp instead; no disk quota beyond "
-            "RLIMIT_FSIZE per file",))
-    notes = ["namespaces: IPC, UTS, mount" + (", network" if network else "")
-             + ("" if is_root else " (in a user namespace)")]
+            "RLIMIT_FSIZE per file; " + pidns.OFF,))
+    notes.insert(0, "namespaces: IPC, UTS, mount" + (", network" if network else "")
+                 + (", PID" if pid else "") + ("" if is_root else " (in a user namespace)"))
+    if pid:
+        pidns.split_off_init()  # from here on, the namespace's first process
     try:
         _mount_quota(workdir, quota_bytes)
     except OSError as exc:
@@ -167,15 +169,34 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
     if hide:
         try:
             for folder in hide:
-                _mount("tmpfs", str(folder), "tmpfs",
+                kernel.mount("tmpfs", str(folder), "tmpfs",
                        MS_RDONLY | MS_NOSUID | MS_NODEV | MS_NOEXEC, "size=4k,nr_inodes=2,mode=0555")
         except OSError as exc:
             notes.append(f"covering excluded folders skipped at {folder}: {exc.strerror or exc}")
         else:
             notes.append(f"excluded folders covered by empty mounts: {len(hide)}")
+    if pid:
+        try:
+            notes.append(pidns.mount_proc())
+        except OSError as exc:
+            notes.append(f"/proc not remounted ({exc.strerror or exc}): {pidns.OFF}")
     if not is_root:
         _drop_namespace_capabilities()
     return NamespaceResult(True, quota_bytes, tuple(notes))
+
+
+def _unshare(flags: int, pid: bool, notes: list[str]) -> bool:
+    """New namespaces of ``flags`` (in a new user namespace unless root), with a PID
+    namespace if ``pid`` and the kernel allows one; True when it did."""
+    enter = kernel.unshare if os.geteuid() == 0 else _enter_user_namespace
+    if pid:
+        try:
+            enter(flags | pidns.CLONE_NEWPID)
+            return True
+        except OSError as exc:
+            notes.append(f"PID namespace skipped ({exc.strerror or exc}): {pidns.OFF}")
+    enter(flags)
+    return False
 
 
 def _enter_user_namespace(flags: int) -> None:
@@ -206,11 +227,11 @@ def _mount_quota(workdir: Path, quota_bytes: int) -> None:
     copied from there. Mounts are made private first so that nothing propagates
     back to the grader's namespace.
     """
-    _mount(None, "/", None, MS_REC | MS_PRIVATE, None)
+    kernel.mount(None, "/", None, MS_REC | MS_PRIVATE, None)
     old = os.open(workdir, os.O_RDONLY | os.O_DIRECTORY)
     try:
         options = f"size={quota_bytes},nr_inodes=65536,mode=0700"
-        _mount("tmpfs", str(workdir), "tmpfs", MS_NOSUID | MS_NODEV | MS_NOEXEC, options)
+        kernel.mount("tmpfs", str(workdir), "tmpfs", MS_NOSUID | MS_NODEV | MS_NOEXEC, options)
         try:
             os.chown(workdir, os.getuid(), os.getgid())
             shutil.copytree(f"/proc/self/fd/{old}", workdir, symlinks=True, dirs_exist_ok=True)
@@ -293,14 +314,3 @@ def user_namespaces_allowed() -> bool:
     _, status = os.waitpid(pid, 0)
     return os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
 
-
-def _mount(source: str | None, target: str, fstype: str | None, flags: int,
-           data: str | None) -> None:
-    def c_str(text: str | None) -> bytes | None:
-        return None if text is None else os.fsencode(text)
-
-    libc = kernel.libc()
-    libc.mount.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_char_p,
-                           ctypes.c_ulong, ctypes.c_char_p]
-    kernel.check("mount",
-                 libc.mount(c_str(source), c_str(target), c_str(fstype), flags, c_str(data)))

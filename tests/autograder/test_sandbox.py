@@ -25,7 +25,7 @@ import sys
 import textwrap
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -585,14 +585,17 @@ def test_tcp_bind_fails(policy: IsolationPolicy, workdir: Path) -> None:
 # --------------------------------------------------------------------- signals
 
 
-@pytest.mark.parametrize("policy", [DEFAULT, LANDLOCK_ONLY], ids=["default", "landlock-only"])
+@pytest.mark.parametrize("policy, refusal", [
+    (DEFAULT, "ProcessLookupError"),  # in its PID namespace, no process has the grader's pid
+    (replace(LANDLOCK_ONLY, pid_namespace=False), "PermissionError"),  # Landlock's scope
+], ids=["default", "landlock-only"])
 def test_cannot_signal_the_grader(
-    policy: IsolationPolicy, workdir: Path, grader_terms: list[int]
+    policy: IsolationPolicy, refusal: str, workdir: Path, grader_terms: list[int]
 ) -> None:
     require_policy(policy)
     grader = os.getpid()
     outcome = run_sandboxed(lambda: os.kill(grader, signal.SIGTERM), workdir, policy=policy)
-    assert outcome.error["error"] == "PermissionError"
+    assert outcome.error["error"] == refusal
     time.sleep(0.05)
     assert grader_terms == []
 
@@ -688,7 +691,10 @@ def test_grader_environment_is_unreadable_through_proc(workdir: Path) -> None:
     require_policy(DEFAULT)
     environ = Path(f"/proc/{os.getpid()}/environ")
     outcome = run_sandboxed(lambda: environ.read_bytes().hex(), workdir)
-    assert outcome.error["error"] == "PermissionError"
+    assert outcome.error["error"] == "FileNotFoundError"  # not in the child's PID namespace
+    outcome = run_sandboxed(lambda: environ.read_bytes().hex(), workdir,
+                            policy=replace(DEFAULT, pid_namespace=False))
+    assert outcome.error["error"] == "PermissionError"  # the user switch
 
 
 def test_inherited_environment_block_is_wiped(workdir: Path) -> None:
