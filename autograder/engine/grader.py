@@ -496,9 +496,17 @@ def _combined(assignment: str, named: list[tuple[str, SubmissionResult]],
     stdout = "".join(f"--- {name} ---\n{p.stdout}" for name, p in named if p.stdout)
     return replace(_result(assignment, outcome, output,
                            tuple(t for p in parts for t in p.tests), seed),
-                   stdout=stdout, notes=tuple(f"{name}: {n}" for name, p in named for n in p.notes),
+                   stdout=stdout, notes=_merged_notes(named),
                    cell_errors=tuple(e for p in parts for e in p.cell_errors),
                    cpu_seconds=round(sum(p.cpu_seconds for p in parts), 3))
+
+
+def _merged_notes(named: list[tuple[str, SubmissionResult]]) -> tuple[str, ...]:
+    """The notes of every notebook: one copy of those all share, the others named."""
+    shared = set.intersection(*(set(p.notes) for _, p in named))
+    notes = [n for n in named[0][1].notes if n in shared]
+    notes += [f"{name}: {n}" for name, p in named for n in p.notes if n not in shared]
+    return tuple(dict.fromkeys(notes))
 
 
 def _result(assignment: str, outcome: Any, output: str, tests: tuple[CheckResult, ...],
