@@ -461,6 +461,27 @@ def submitted_notebooks(assignment: Assignment, path: Path) -> dict[str, Path]:
     return found
 
 
+def group_submissions(assignment: Assignment, paths: Sequence[Path]) -> list[Path]:
+    """The submissions among notebook files found for ``assignment``: files or folders.
+
+    In nbgrader's layout (``submitted/<student>/<assignment>/``) only the folders
+    of this assignment are kept. For an assignment of several notebooks, a folder
+    holding any of them is one submission (the student's other notebooks in it
+    are not graded); a file elsewhere stays a submission of the first notebook.
+    """
+    names = {nb.name for nb in assignment.notebooks}
+    found: list[Path] = []
+    for path in paths:
+        parts = Path(path).parts
+        if len(parts) >= 4 and parts[-4] == "submitted" and parts[-2] != assignment.name:
+            continue  # another assignment of the nbgrader course
+        if len(names) > 1 and any(os.path.lexists(Path(path).parent / n) for n in names):
+            found.append(Path(path).parent)
+        else:
+            found.append(Path(path))
+    return list(dict.fromkeys(found))
+
+
 def _submission_sha256(path: Path) -> str:
     """The file's SHA-256, or over a folder's files (relative path and contents)."""
     if not path.is_dir() or path.is_symlink():
@@ -550,7 +571,7 @@ def _file_sha256(path: Path) -> str:
 
 
 __all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
-           "forget_check_modules", "submission_key", "submission_seed", "summarise_run"]
+           "forget_check_modules", "group_submissions", "submitted_notebooks", "submission_key", "submission_seed", "summarise_run"]
 
 
 def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException | str) -> SubmissionResult:
@@ -567,4 +588,4 @@ def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseExcep
 
 def client_key(path: Path, assignment: Assignment, options: GradingOptions) -> str:
     """The key a result of ``path`` must carry to be reused (computed where the file is)."""
-    return submission_key(_file_sha256(path), assignment, options)
+    return submission_key(_submission_sha256(Path(path)), assignment, options)

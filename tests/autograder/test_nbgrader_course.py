@@ -7,7 +7,9 @@ by numgrade and by the real ``nbgrader autograde`` side by side, further down.
 
 from __future__ import annotations
 
+import copy
 import json
+import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -235,3 +237,88 @@ def test_numgrade_scores_an_nbgrader_course_as_nbgrader_does(course: Path, tmp_p
             assert HIDDEN_MARK not in (tmp_path / student / "results.json").read_text()
             assert "problem2.ipynb" in page and "waits for a person" in page
     assert got == expected
+
+
+# -- attacks on locked cells ---------------------------------------------------------
+
+def _limit_assignment(root: Path):
+    """An nbgrader source folder: locked ``LIMIT = 10``, ``total()``, a test against LIMIT."""
+    folder = root / "source" / "sums"
+    folder.mkdir(parents=True)
+    book = nbformat.v4.new_notebook(cells=[
+        _cell("code", "LIMIT = 10\n", grade_id="setup", locked=True),
+        _cell("code", "def total():\n    ### BEGIN SOLUTION\n    return sum(range(LIMIT))\n"
+                      "    ### END SOLUTION\n", grade_id="answer", solution=True),
+        _cell("code", "assert total() == 45, 'total() should be 45'\n", grade_id="test_total",
+              grade=True, locked=True, points=2),
+    ])
+    nbformat.write(book, folder / "sums.ipynb")
+    return folder, book
+
+
+def test_a_duplicated_locked_cell_does_not_hide_the_edited_one(tmp_path: Path) -> None:
+    """The edited locked cell loses its nbgrader metadata (keeping its cell id) and an
+    untouched copy under the same grade_id sits above it: grade_id alone would restore
+    the copy and run the edited cell, and the wrong answer would pass unflagged."""
+    folder, book = _limit_assignment(tmp_path)
+    setup, answer, test = (copy.deepcopy(c) for c in book.cells)
+    answer.source = "def total():\n    return 3\n"  # right only when LIMIT is 3
+    edited = copy.deepcopy(setup)
+    edited.source = "LIMIT = 3\n"
+    edited.metadata = {}  # the id stays: Jupyter's metadata editor does not change it
+    untouched = copy.deepcopy(setup)
+    untouched["id"] = "copy-of-setup"
+    attack = nbformat.v4.new_notebook(cells=[untouched, edited, answer, test])
+    path = tmp_path / "mallory.ipynb"
+    nbformat.write(attack, path)
+    with Grader(load_assignment(folder)) as grader:
+        result = grader.grade(path, id="mallory")
+    scores = {t.name: t.score for t in result.tests}
+    assert scores == {"test_total": 0.0}
+    assert any("more than one copy" in note and "`setup`" in note for note in result.notes)
+
+
+def test_the_student_cell_at_a_test_cells_place_is_the_one_replaced(tmp_path: Path) -> None:
+    """A copy of the test cell moved above the answer must not decide where the test runs."""
+    folder, book = _limit_assignment(tmp_path)
+    setup, answer, test = (copy.deepcopy(c) for c in book.cells)
+    answer.source = "def total():\n    return sum(range(LIMIT))\n"
+    early = copy.deepcopy(test)
+    early["id"] = "moved-copy"
+    path = tmp_path / "s.ipynb"
+    nbformat.write(nbformat.v4.new_notebook(cells=[setup, early, answer, test]), path)
+    with Grader(load_assignment(folder)) as grader:
+        result = grader.grade(path, id="s")
+    # run at the copy's place (before total() exists) the test would fail
+    assert {t.name: t.score for t in result.tests} == {"test_total": 2.0}
+
+
+# -- the command line on the course --------------------------------------------------
+
+def test_grade_and_release_an_nbgrader_course_from_the_command_line(course: Path,
+                                                                    tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    released = subprocess.run(
+        [sys.executable, "-m", "autograder", "release", "ps1", "--course", str(course),
+         "--out", str(tmp_path / "release")], capture_output=True, text=True, env=env,
+        timeout=600)
+    assert released.returncode == 0, released.stderr
+    assert sorted(p.name for p in (tmp_path / "release").iterdir()) == [
+        "assignment.toml", "jupyter.png", "problem1.ipynb", "problem2.ipynb"]
+    assert (tmp_path / "release" / "jupyter.png").read_bytes() == PNG
+    for name in ("problem1.ipynb", "problem2.ipynb"):
+        text = (tmp_path / "release" / name).read_text()
+        assert HIDDEN_MARK not in text and "BEGIN SOLUTION" not in text
+    graded = subprocess.run(
+        [sys.executable, "-m", "autograder", "grade", str(course / "source" / "ps1"),
+         str(course / "submitted"), "--out", str(tmp_path / "results"), "--no-progress"],
+        capture_output=True, text=True, env=env, timeout=900)
+    assert graded.returncode in (0, 1), graded.stderr
+    folders = sorted(p.name for p in (tmp_path / "results").iterdir() if p.is_dir())
+    assert folders == ["alice", "bob", "carol"]  # one result per student, not per notebook
+    expected = _nbgrader_scores(course)
+    for student in STUDENTS:
+        data = json.loads((tmp_path / "results" / student / "results.json").read_text())
+        auto = sum(t["score"] for t in data["tests"] if t["extra_data"]["kind"] != "needs-person")
+        assert auto == expected[student]
+        assert data["max_score"] == 9
