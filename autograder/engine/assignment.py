@@ -27,6 +27,14 @@ notebook, at least one check and every data glob must exist::
     call_timeout = 10             # seconds per call from a check
     memory_bytes = 2_000_000_000  # and the other fields of autograder.sandbox.policy.Limits
 
+An nbgrader source folder (no ``assignment.toml``; notebooks with nbgrader cell
+metadata) loads too, through :mod:`autograder.engine.nbgrader_source`: all its
+notebooks, its other files as data, its test cells and manually graded cells.
+``[assignment] format = "nbgrader"`` reads a folder with a toml the same way, the
+toml adding pytest checks; ``notebook`` then names the notebook the checks call.
+Names are looked up under ``assignments/``, or under ``source/`` of an nbgrader
+course root (``nbgrader_config.py`` beside ``source/``).
+
 Every mistake raises :class:`~autograder.errors.AssignmentError` naming the
 file, the key and what to do.
 """

@@ -256,6 +256,10 @@ class Grader:
                                             section=nb.name if several else None))
                  for nb in self.assignment.notebooks]
         result = _combined(self.assignment.name, parts, seed)
+        waiting = sum(t.max_score for t in result.tests if t.kind == "needs-person")
+        if waiting:
+            result = replace(result, output=f"{result.output}\n{waiting:g} point(s) wait for a "
+                                            "person to grade them; they are not in the score yet.")
         result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
                          execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
         if out_dir is not None:

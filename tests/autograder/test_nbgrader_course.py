@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import shutil
 import subprocess
 import sys
 from dataclasses import replace
@@ -236,6 +237,7 @@ def test_numgrade_scores_an_nbgrader_course_as_nbgrader_does(course: Path, tmp_p
             assert HIDDEN_MARK not in page and "squares(10)" not in page
             assert HIDDEN_MARK not in (tmp_path / student / "results.json").read_text()
             assert "problem2.ipynb" in page and "waits for a person" in page
+            assert "3 point(s) wait for a person" in result.output
     assert got == expected
 
 
@@ -322,3 +324,35 @@ def test_grade_and_release_an_nbgrader_course_from_the_command_line(course: Path
         auto = sum(t["score"] for t in data["tests"] if t["extra_data"]["kind"] != "needs-person")
         assert auto == expected[student]
         assert data["max_score"] == 9
+
+
+def test_an_assignment_toml_adds_pytest_checks_to_the_cell_tests(course: Path,
+                                                                 tmp_path: Path) -> None:
+    folder = tmp_path / "ps1"
+    shutil.copytree(course / "source" / "ps1", folder)
+    (folder / "assignment.toml").write_text(
+        '[assignment]\nformat = "nbgrader"\nnotebook = "problem2.ipynb"\n')
+    (folder / "checks" / "hidden").mkdir(parents=True)
+    (folder / "checks" / "hidden" / "test_size.py").write_text(
+        f"def test_image_bytes(student):\n    assert student.image_bytes() == {len(PNG)}\n")
+    assignment = load_assignment(folder)
+    assert [p.name for p in assignment.notebooks] == ["problem2.ipynb", "problem1.ipynb"]
+    with Grader(assignment) as grader:
+        result = grader.grade(course / "submitted" / "alice" / "ps1", id="alice")
+    scores = {(t.notebook, t.name): t.score for t in result.tests if t.kind != "needs-person"}
+    assert scores == {("problem2.ipynb", "test_size"): 3.0, ("problem2.ipynb", "image_bytes"): 1.0,
+                      ("problem1.ipynb", "correct_squares"): 2.0,
+                      ("problem1.ipynb", "squares_invalid_input"): 1.0}
+
+
+def test_folders_that_are_not_assignments_are_named(course: Path, tmp_path: Path) -> None:
+    from autograder.errors import AssignmentError
+
+    with pytest.raises(AssignmentError, match="nbgrader course root; name one of its"):
+        load_assignment(course)
+    assert load_assignment("ps1", search_root=course).root == (course / "source" / "ps1").resolve()
+    (tmp_path / "plain").mkdir()
+    nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("x = 1")]),
+                   tmp_path / "plain" / "a.ipynb")
+    with pytest.raises(AssignmentError, match="no assignment.toml and no nbgrader notebook"):
+        load_assignment(tmp_path / "plain")
