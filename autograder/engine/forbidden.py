@@ -51,8 +51,8 @@ class Rules:
     forbid: tuple[str, ...] = ()
     reason: str = ""
     #: forbidden names that allowed libraries need inside (``matplotlib.path`` for
-    #: drawing): student code may not name them, but the worker leaves the aliases
-    #: inside other libraries working
+    #: drawing): student code may not name them, and in the worker they answer calls
+    #: from that library's code only
     internal_use: tuple[str, ...] = ()
 
     def to_wire(self) -> dict[str, object]:

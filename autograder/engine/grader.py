@@ -12,6 +12,7 @@ import hashlib
 import importlib.util
 import os
 import stat
+import tempfile
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -35,10 +36,17 @@ from autograder.engine.celltests import (
     place_cell_tests,
     score_cell_tests,
 )
+from autograder.engine.identify import identify
 from autograder.engine.notebook import Notebook, locked_cells, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
 from autograder.engine.student_process import NotebookRun, StudentProcess
+from autograder.engine.submission import (
+    Submission,
+    file_sha256,
+    open_submission,
+    submission_sha256,
+)
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
 from autograder.results.store import write_submission
@@ -155,7 +163,7 @@ def _tree_digest(root: Path, *, skip: frozenset[str]) -> str:
                 continue
             path = Path(directory, name)
             digest.update(str(path.relative_to(root)).encode() + b"\0")
-            digest.update(_file_sha256(path).encode())
+            digest.update(file_sha256(path).encode())
     return digest.hexdigest()
 
 
@@ -246,16 +254,22 @@ class Grader:
         """
         start = time.perf_counter()
         sub_id = id or Path(path).stem
-        raw_sha = _submission_sha256(Path(path))
+        raw_sha = submission_sha256(Path(path))
         digest = assignment_digest(self.assignment)
         key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
         seed = submission_seed(self.assignment, sub_id)
-        files = submitted_notebooks(self.assignment, Path(path))
         several = len(self.assignment.notebooks) > 1
-        parts = [(nb.name, self._grade_part(nb.name, files.get(nb.name), seed, out_dir, digest,
-                                            section=nb.name if several else None))
-                 for nb in self.assignment.notebooks]
+        # -- intake: a notebook, folder or zip -> its files (engine/submission.py), and
+        # whether the notebook is this assignment's (engine/identify.py)
+        with tempfile.TemporaryDirectory(prefix="numgrade-submission-") as scratch:
+            submission = open_submission(Path(path), self.assignment.notebooks,
+                                         scratch=Path(scratch))
+            files = dict(submission.notebooks)
+            parts = [(nb.name, self._grade_part(
+                nb.name, files.get(nb.name), submission, seed, out_dir, digest,
+                section=nb.name if several else None)) for nb in self.assignment.notebooks]
         result = _combined(self.assignment.name, parts, seed)
+        result = replace(result, notes=submission.notes + result.notes)
         waiting = sum(t.max_score for t in result.tests if t.kind == "needs-person")
         if waiting:
             result = replace(result, output=f"{result.output}\n{waiting:g} point(s) wait for a "
@@ -266,22 +280,11 @@ class Grader:
             write_submission(out_dir, result, title=self.assignment.title)
         return result
 
-    def _grade_part(self, name: str, path: Path | None, seed: int, out_dir: Path | None,
-                    digest: str, *, section: str | None) -> SubmissionResult:
+    def _grade_part(self, name: str, path: Path | None, submission: Submission, seed: int,
+                    out_dir: Path | None, digest: str, *, section: str | None) -> SubmissionResult:
         """One notebook of the submission (a whole submission when there is one)."""
         runs_checks = name == self.assignment.notebook.name
-        try:
-            if path is None:
-                raise NotebookError(f"The notebook {name!r} is missing from your submission; "
-                                    "hand in every notebook of the assignment under its "
-                                    "released name.", kind="unreadable")
-            _require_regular_file(Path(path))
-            notebook: Notebook | None = restore_locked(
-                read_notebook(path, max_bytes=self.options.max_notebook_bytes),
-                self._locked[name])
-            problem = ""
-        except NotebookError as exc:
-            notebook, problem = None, str(exc)
+        notebook, problem = self._intake(name, path, submission)
         if notebook is not None:
             part = self._grade_notebook(notebook, seed, out_dir, digest, name=name,
                                         runs_checks=runs_checks)
@@ -289,6 +292,26 @@ class Grader:
             part = self._grade_unreadable(problem, seed, out_dir, digest, name=name,
                                           runs_checks=runs_checks)
         return _in_section(part, section)
+
+    def _intake(self, name: str, path: Path | None, submission: Submission
+                ) -> tuple[Notebook | None, str]:
+        """The student's notebook ``name`` with its locked cells restored, or the problem."""
+        if submission.problem:
+            return None, submission.problem
+        if path is None:
+            return None, (f"The notebook {name!r} is missing from your submission; hand in "
+                          "every notebook of the assignment under its released name.")
+        try:
+            _require_regular_file(path)
+            notebook = read_notebook(path, max_bytes=self.options.max_notebook_bytes)
+        except NotebookError as exc:
+            return None, str(exc)
+        if name == self.assignment.notebooks[0].name:  # which assignment: from the first
+            identity = identify(notebook, self.assignment)
+            if identity.problem:
+                return None, identity.problem
+            notebook = replace(notebook, warnings=notebook.warnings + identity.notes)
+        return restore_locked(notebook, self._locked[name]), ""
 
     def _cell_tests(self, name: str) -> list[CellTest]:
         return [t for t in self.assignment.cell_tests if t.notebook == name]
@@ -446,57 +469,6 @@ def without_cells(run: NotebookRun, indices: frozenset[int]) -> NotebookRun:
                    crashed_cells=tuple(i for i in run.crashed_cells if i not in indices))
 
 
-def submitted_notebooks(assignment: Assignment, path: Path) -> dict[str, Path]:
-    """Assignment notebook name -> the student's file, for a file or a folder.
-
-    A file is the first notebook whatever its name (a single-notebook assignment's
-    usual case). A folder holds the notebooks under their released names; with one
-    notebook, a folder holding a single ``.ipynb`` of another name is taken too.
-    """
-    first = assignment.notebooks[0].name
-    if not path.is_dir() or path.is_symlink():
-        return {first: path}
-    found = {nb.name: path / nb.name for nb in assignment.notebooks
-             if os.path.lexists(path / nb.name)}
-    if not found and len(assignment.notebooks) == 1:
-        candidates = sorted(path.glob("*.ipynb"))
-        if len(candidates) == 1:
-            found[first] = candidates[0]
-    return found
-
-
-def group_submissions(assignment: Assignment, paths: Sequence[Path]) -> list[Path]:
-    """The submissions among notebook files found for ``assignment``: files or folders.
-
-    In nbgrader's layout (``submitted/<student>/<assignment>/``) only the folders
-    of this assignment are kept. For an assignment of several notebooks, a folder
-    holding any of them is one submission (the student's other notebooks in it
-    are not graded); a file elsewhere stays a submission of the first notebook.
-    """
-    names = {nb.name for nb in assignment.notebooks}
-    found: list[Path] = []
-    for path in paths:
-        parts = Path(path).parts
-        if len(parts) >= 4 and parts[-4] == "submitted" and parts[-2] != assignment.name:
-            continue  # another assignment of the nbgrader course
-        if len(names) > 1 and any(os.path.lexists(Path(path).parent / n) for n in names):
-            found.append(Path(path).parent)
-        else:
-            found.append(Path(path))
-    return list(dict.fromkeys(found))
-
-
-def _submission_sha256(path: Path) -> str:
-    """The file's SHA-256, or over a folder's files (relative path and contents)."""
-    if not path.is_dir() or path.is_symlink():
-        return _file_sha256(path)
-    digest = hashlib.sha256()
-    for file in sorted(p for p in path.rglob("*") if p.is_file()):
-        digest.update(file.relative_to(path).as_posix().encode() + b"\0")
-        digest.update(_file_sha256(file).encode())
-    return digest.hexdigest()
-
-
 def _in_section(part: SubmissionResult, section: str | None) -> SubmissionResult:
     """``part`` with its checks and cell errors marked as belonging to notebook ``section``."""
     if section is None:
@@ -563,19 +535,8 @@ def _require_regular_file(path: Path) -> None:
                             "submit the .ipynb file itself.", kind="not-regular")
 
 
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    try:
-        with open(path, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
-    except OSError as exc:
-        digest.update(f"unreadable:{exc}".encode())
-    return digest.hexdigest()
-
-
 __all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
-           "forget_check_modules", "group_submissions", "submitted_notebooks", "submission_key", "submission_seed", "summarise_run"]
+           "forget_check_modules", "submission_key", "submission_seed", "summarise_run"]
 
 
 def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException | str) -> SubmissionResult:
@@ -585,11 +546,11 @@ def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseExcep
         detail = exc
     return SubmissionResult(
         id=sub_id, source=str(path), assignment=assignment.name, key="",
-        sha256=_file_sha256(path), outcome="error",
+        sha256=submission_sha256(path), outcome="error",
         output=f"The grader failed on this submission ({detail}); it will be regraded on the next run.",
         tests=(), execution_time=0.0, seed=0)
 
 
 def client_key(path: Path, assignment: Assignment, options: GradingOptions) -> str:
     """The key a result of ``path`` must carry to be reused (computed where the file is)."""
-    return submission_key(_submission_sha256(Path(path)), assignment, options)
+    return submission_key(submission_sha256(path), assignment, options)

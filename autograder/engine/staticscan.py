@@ -60,6 +60,16 @@ _IMPORT_FUNCS = frozenset({"builtins.__import__", "importlib.import_module",
                            "importlib.__import__"})
 _EXEC_FUNCS = frozenset({"builtins.exec", "builtins.eval", "builtins.compile",
                          "runpy.run_path", "runpy.run_module"})
+#: attributes that reach objects by their links instead of their names (a class's
+#: subclasses, a function's closure and globals, frames): the worker's guard refuses
+#: what it can on these routes, and a person looks at the rest
+_DIGGING_ATTRS = frozenset({"__subclasses__", "__closure__", "cell_contents", "__globals__",
+                            "__wrapped__", "__code__", "f_back", "f_locals", "f_globals",
+                            "tb_frame", "gi_frame", "_getframe", "_current_frames",
+                            "settrace", "setprofile", "get_referents", "get_referrers",
+                            "get_objects", "__builtins__", "__self__"})
+#: modules whose every use is a route around names
+_DIGGING_MODULES = ("ctypes", "gc")
 _TEXT_LIMIT = 200
 _COMPREHENSIONS = (ast.ListComp, ast.SetComp, ast.DictComp, ast.GeneratorExp)
 _NESTED_SCOPES = (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Lambda,
@@ -262,6 +272,9 @@ class _Analyzer:
                    text=ctx.where.text(line))
 
     def _check(self, qual: str, node: ast.AST, ctx: _Ctx) -> None:
+        digging = _matches(qual, _DIGGING_MODULES)
+        if digging is not None:
+            self._dynamic(digging, node, ctx)
         entry = _matches(qual, self.forbid)
         if entry is not None:
             self.uses.append(self._use(entry, node, ctx))
@@ -570,6 +583,9 @@ class _Analyzer:
             rest = base
         if qual is not None:
             self._check(".".join([qual, *reversed(attrs)]), node, ctx)
+        for attr in attrs:
+            if attr in _DIGGING_ATTRS:
+                self._dynamic(attr, node, ctx)
         return rest
 
     def _walrus(self, name: str, scopes: tuple[_Scope, ...], ctx: _Ctx) -> None:
@@ -593,6 +609,8 @@ class _Analyzer:
             else:
                 self._dynamic(func.removeprefix("builtins."), node, ctx)
         elif func == "builtins.getattr" and len(node.args) >= 2:
+            if _literal_str(node.args[1]) in _DIGGING_ATTRS:
+                self._dynamic(str(_literal_str(node.args[1])), node, ctx)
             qual = self._call_qual(node, scopes)
             if qual is not None:
                 self._check(qual, node, ctx)

@@ -1,22 +1,26 @@
-"""Make an assignment's forbidden libraries unreachable in the worker, whatever the spelling.
+"""Make an assignment's forbidden libraries unusable in the worker, whatever the route.
 
 The static scan (``autograder.engine.staticscan``) names a forbidden use with a clear
 message, but names can be computed (``importlib.import_module("scipy." + "spatial")``,
 ``exec`` of a decoded string, ``vars(scipy)[...]``, a private alias inside an
-allowed module). This module enforces the rule on what runs:
+allowed module) and objects can be reached without a name (``__subclasses__``).
+This module enforces the rule on what runs:
 
-1. every forbidden module (and its submodules) is taken out of ``sys.modules``
-   and off its parent package; a forbidden attribute (``numpy.polyfit``) is
-   replaced on its module;
-2. every other reference to those objects found in a loaded module's namespace,
+1. every reference to a forbidden module's classes and functions (or to a
+   forbidden attribute such as ``numpy.polyfit``) in a loaded module's namespace,
    or in a class defined there, is replaced by a :class:`Blocked` stand-in that
-   raises :class:`NotAllowedError`, unless the assignment lists the name under
-   ``internal_use`` (a library the allowed ones need inside, such as
-   ``matplotlib.path`` for drawing);
-3. an audit hook (PEP 578; once added it cannot be removed) refuses any new
-   import of a forbidden module, by any route through the import system, and the
-   ``gc`` functions that could dig the originals out of memory;
-4. the grader also keeps the forbidden packages' folders out of the sandbox's
+   raises :class:`NotAllowedError`;
+2. every class defined in a forbidden module, found from ``object`` through
+   ``__subclasses__``, has its constructor and members replaced by stand-ins
+   (:mod:`autograder.worker.entrypoints`; C and Cython classes too);
+3. names an allowed library needs inside (``[rules] internal_use``, such as
+   ``matplotlib.bezier`` for drawing) stay usable by that library only: their
+   functions and methods become caller-checked entries (:mod:`autograder.worker.gate`,
+   :mod:`autograder.worker.callers`);
+4. an audit hook (PEP 578; once added it cannot be removed) refuses any new
+   import of a forbidden module, re-running or reading its files, and the ways to
+   dig objects or frames out of memory (``gc``, tracers, ``ctypes``);
+5. the grader also keeps the forbidden packages' folders out of the sandbox's
    readable paths, so their files cannot be loaded by hand.
 
 A call that reaches a blocked object raises :class:`NotAllowedError`, which the
@@ -25,21 +29,20 @@ grader turns into a "forbidden" verdict with the assignment's reason.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import importlib.util
+import os
 import sys
 import types
 from collections.abc import Iterable, Sequence
 from typing import Any
 
+from autograder.worker import entrypoints, gate
+from autograder.worker.callers import Callers
+from autograder.worker.gate import NotAllowedError
+
 __all__ = ["Blocked", "NotAllowedError", "forbid"]
-
-#: audit events that would hand out references to blocked objects
-_DIGGING = frozenset({"gc.get_objects", "gc.get_referrers", "gc.get_referents"})
-
-
-class NotAllowedError(ImportError):
-    """Raised when student code reaches a library the assignment forbids."""
-
 
 class Blocked:
     """Stands where a forbidden module, class or function was."""
@@ -55,8 +58,12 @@ class Blocked:
         reason = object.__getattribute__(self, "_reason")
         raise NotAllowedError(f"`{name}` is not allowed in this assignment. {reason}".strip())
 
+    def __getattr__(self, attr: str) -> Any:
+        if attr.startswith("__") and attr.endswith("__"):  # metadata lookups (staticmethod's)
+            raise AttributeError(attr)
+        return self._refuse()
+
     __call__ = _refuse
-    __getattr__ = _refuse
     __iter__ = _refuse
     __getitem__ = _refuse
 
@@ -68,27 +75,89 @@ def forbid(names: Sequence[str], *, internal_use: Sequence[str] = (), reason: st
     """Apply the assignment's ``forbid`` list to this process; return one note per step."""
     if not names:
         return []
-    # Names that allowed libraries need inside stay loaded and importable: for them
-    # the static scan's verdict is the rule (said in the assignment's toml).
     kept = tuple(internal_use)
     prefixes = tuple(name for name in names if not _matches(name, kept))
-    for name in prefixes:  # load what exists, so that it can be blocked in place
+    for name in (*prefixes, *kept):  # load what exists, so that it can be blocked in place
         try:
             importlib.import_module(name)
         except Exception:  # not installed, an attribute, or fails to import: nothing to load
             pass
     modules, objects = _targets(prefixes)
+    inner_modules, inner_objects = _targets(kept)
     # Loaded forbidden modules stay loaded (allowed code may import them at call time,
     # as matplotlib's Triangulation does with its qhull module even when it is given
     # the triangles): their classes and functions are blocked in place instead, so
     # every route to the module object finds only stand-ins.
-    poison = {id(obj): name for name, obj in objects.items()}
-    replaced = _replace_aliases(poison, set(), reason)
-    for name in objects:
+    callers = Callers(_needing(inner_modules, inner_objects))
+    make_entry, start = gate.install(callers, prefixes, _files(modules, inner_modules), reason)
+    poison = {id(obj): (name, None) for name, obj in objects.items()}
+    poison.update({id(obj): (name, make_entry(obj, name)) for name, obj in inner_objects.items()
+                   if isinstance(obj, (types.FunctionType, types.BuiltinFunctionType))})
+    replaced = _replace_aliases(poison, reason)
+    for name, obj in objects.items():
         _set_on_parent(name, Blocked(name, reason))
-    sys.addaudithook(_audit_hook(prefixes, reason))
-    return [f"forbidden at run time: {', '.join(prefixes)} ({len(modules)} loaded modules "
-            f"blocked in place, {replaced} references replaced)"]
+    classes = _classes(prefixes, objects), _classes(kept, inner_objects)
+    for cls in classes[0]:
+        entrypoints.replace_entry_points(cls, lambda _obj, name: Blocked(name, reason),
+                                         constructor=True)
+    for cls in classes[1]:
+        entrypoints.replace_entry_points(cls, make_entry)
+    start()  # once added, the hook cannot be removed
+    return [f"forbidden at run time: {', '.join(prefixes) or '-'} ({len(modules)} loaded modules "
+            f"blocked in place, {replaced} references replaced, {len(classes[0])} classes "
+            f"refused); library use only: {', '.join(kept) or '-'} ({len(classes[1])} classes, "
+            f"{len(callers)} library functions may call them)"]
+
+
+def _classes(prefixes: tuple[str, ...], objects: dict[str, Any]) -> list[type]:
+    """The classes defined under ``prefixes`` (however reached), and those named directly."""
+    if not prefixes:
+        return []
+    named = {id(v): v for v in objects.values() if isinstance(v, type)}
+    found = [c for c in entrypoints.all_classes()
+             if id(c) in named or _matches(str(getattr(c, "__module__", "")), prefixes)]
+    return sorted(found, key=lambda c: len(c.__mro__))
+
+
+def _needing(modules: dict[str, types.ModuleType],
+             objects: dict[str, Any]) -> list[types.ModuleType]:
+    """The loaded modules that may call an internal name: those of its package, and any
+    other that holds a reference to it.
+
+    The whole package, because its modules call methods on instances other modules
+    made (``matplotlib.axes`` asks ``BezierSegment.axis_aligned_extrema`` of the
+    curves of a patch's path).
+    """
+    wanted = {id(v) for v in (*modules.values(), *objects.values())}
+    packages = tuple({n.partition(".")[0] for n in (*modules, *objects)})
+    needing: dict[int, types.ModuleType] = {id(m): m for m in modules.values()}
+    for name, module in list(sys.modules.items()):
+        if module is None or id(module) in needing:
+            continue
+        if _matches(name, packages):
+            needing[id(module)] = module
+            continue
+        for _owner, namespace in _namespaces(module):
+            if any(id(v) in wanted for v in list(namespace.values())):
+                needing[id(module)] = module
+                break
+    return list(needing.values())
+
+
+def _files(*groups: dict[str, types.ModuleType]) -> frozenset[str]:
+    """The files (and package folders) of the forbidden modules: not to be read or re-run."""
+    found: set[str] = set()
+    for group in groups:
+        for module in group.values():
+            origin = getattr(module, "__file__", None)
+            if not isinstance(origin, str):
+                continue
+            found.add(os.path.realpath(origin))
+            with contextlib.suppress(ValueError, NotImplementedError):
+                found.add(os.path.realpath(importlib.util.cache_from_source(origin)))
+            for folder in getattr(module, "__path__", None) or ():
+                found.add(os.path.realpath(folder))
+    return frozenset(found)
 
 
 def _matches(name: str, prefixes: tuple[str, ...]) -> bool:
@@ -120,22 +189,28 @@ def _targets(prefixes: tuple[str, ...]) -> tuple[dict[str, types.ModuleType], di
     return modules, objects
 
 
-def _replace_aliases(poison: dict[int, str], gone: set[str], reason: str) -> int:
-    """Replace references to poisoned objects in loaded modules and their classes."""
+def _replace_aliases(poison: dict[int, tuple[str, Any]], reason: str) -> int:
+    """Replace references to poisoned objects in loaded modules and their classes.
+
+    ``poison`` maps ``id(object)`` to its name and its replacement (``None``: a
+    refusing :class:`Blocked`).
+    """
     count = 0
     for modname, module in list(sys.modules.items()):
-        if module is None or modname in gone:
+        if module is None:
             continue
         for owner, namespace in _namespaces(module):
             for key, value in list(namespace.items()):
-                name = poison.get(id(value))
-                if name is None:
+                found = poison.get(id(value))
+                if found is None:
                     continue
+                name, replacement = found
+                stand_in = Blocked(name, reason) if replacement is None else replacement
                 try:
                     if isinstance(owner, type):
-                        setattr(owner, key, Blocked(name, reason))
+                        setattr(owner, key, stand_in)
                     else:
-                        namespace[key] = Blocked(name, reason)
+                        namespace[key] = stand_in
                     count += 1
                 except (TypeError, AttributeError):  # a read-only class (a C type): leave it
                     pass
@@ -168,12 +243,3 @@ def _set_on_parent(name: str, value: Any) -> None:
             setattr(parent, attr, value)
     except (AttributeError, TypeError):
         pass
-
-
-def _audit_hook(prefixes: tuple[str, ...], reason: str) -> Any:
-    def hook(event: str, args: tuple[Any, ...]) -> None:
-        if event == "import" and args and isinstance(args[0], str) and _matches(args[0], prefixes):
-            raise NotAllowedError(f"`{args[0]}` is not allowed in this assignment. {reason}".strip())
-        if event in _DIGGING:
-            raise NotAllowedError(f"{event} is not available while grading.")
-    return hook
