@@ -27,6 +27,14 @@ notebook, at least one check and every data glob must exist::
     call_timeout = 10             # seconds per call from a check
     memory_bytes = 2_000_000_000  # and the other fields of autograder.sandbox.policy.Limits
 
+An nbgrader source folder (no ``assignment.toml``; notebooks with nbgrader cell
+metadata) loads too, through :mod:`autograder.engine.nbgrader_source`: all its
+notebooks, its other files as data, its test cells and manually graded cells.
+``[assignment] format = "nbgrader"`` reads a folder with a toml the same way, the
+toml adding pytest checks; ``notebook`` then names the notebook the checks call.
+Names are looked up under ``assignments/``, or under ``source/`` of an nbgrader
+course root (``nbgrader_config.py`` beside ``source/``).
+
 Every mistake raises :class:`~autograder.errors.AssignmentError` naming the
 file, the key and what to do.
 """
@@ -42,8 +50,9 @@ from pathlib import Path
 from typing import Any
 
 import autograder
-from autograder.engine.celltests import CellTest
+from autograder.engine.celltests import CellTest, ManualCell
 from autograder.engine.forbidden import Rules
+from autograder.engine.nbgrader_source import course_source_dir, is_nbgrader_folder, nbgrader_parts
 from autograder.errors import AssignmentError
 
 __all__ = [
@@ -60,7 +69,7 @@ SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
                   "file_size_bytes", "output_bytes")
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
 _ALLOWED = {
-    "assignment": ("name", "title", "notebook", "data"),
+    "assignment": ("name", "title", "notebook", "data", "format"),
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
 }
@@ -102,6 +111,8 @@ class Assignment:
         ``(notebook,)``.
     cell_tests : tuple of CellTest
         Tests written as notebook cells (nbgrader or otter courses).
+    manual_cells : tuple of ManualCell
+        Cells a person grades (nbgrader's manually graded answers and tasks).
     requirements : tuple of str
         Extra packages the student's code needs (pip requirement strings).
     """
@@ -121,6 +132,7 @@ class Assignment:
     notebooks: tuple[Path, ...] = ()
     cell_tests: tuple[CellTest, ...] = ()
     requirements: tuple[str, ...] = ()
+    manual_cells: tuple[ManualCell, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.notebooks:
@@ -151,7 +163,7 @@ def list_assignments(search_root: Path | None = None) -> list[str]:
     folder = _assignments_dir(search_root)
     if not folder.is_dir():
         return []
-    return sorted(p.name for p in folder.iterdir() if (p / _TOML).is_file())
+    return sorted(p.name for p in folder.iterdir() if _is_assignment(p))
 
 
 def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Assignment:
@@ -179,6 +191,8 @@ def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Ass
     """
     root = _find_root(spec, search_root)
     toml_path = root / _TOML
+    if not toml_path.is_file():  # an nbgrader source folder as it is
+        return _build(root, toml_path, {"assignment": {"format": "nbgrader"}})
     config = _read_toml(toml_path)
     return _build(root, toml_path, config)
 
@@ -187,7 +201,14 @@ def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Ass
 
 def _assignments_dir(search_root: Path | None) -> Path:
     base = Path(search_root) if search_root is not None else default_search_root()
-    return base / "assignments" if (base / "assignments").is_dir() else base
+    if (base / "assignments").is_dir():
+        return base / "assignments"
+    return course_source_dir(base) or base
+
+
+def _is_assignment(folder: Path) -> bool:
+    """An assignment folder: one with ``assignment.toml``, or an nbgrader source folder."""
+    return (folder / _TOML).is_file() or (folder.is_dir() and is_nbgrader_folder(folder))
 
 
 def _find_root(spec: str | Path, search_root: Path | None) -> Path:
@@ -215,10 +236,15 @@ def _looks_like_path(spec: str) -> bool:
 
 def _checked_root(path: Path) -> Path:
     root = path.resolve()
-    if not (root / _TOML).is_file():
+    if course_source_dir(root) is not None:
         raise AssignmentError(
-            f"{root} has no {_TOML}; every assignment folder needs one "
-            "(see 'An assignment folder' in docs/design.md).")
+            f"{root} is an nbgrader course root; name one of its assignments: "
+            f"'--course {root} ps1', or the folder {root / 'source' / 'ps1'} (for ps1).")
+    if not _is_assignment(root):
+        raise AssignmentError(
+            f"{root} has no {_TOML} and no nbgrader notebook; an assignment folder needs "
+            "one or the other (see 'An assignment folder' in docs/design.md, and "
+            "docs/coming-from-nbgrader-or-otter.md).")
     return root
 
 
@@ -304,20 +330,33 @@ def _string_list(path: Path, config: dict[str, Any], table: str, key: str) -> tu
 def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
     name = _name(root, toml_path, config)
     title = _get(toml_path, config, "assignment", "title", str, name)
-    notebook = _notebook(root, toml_path,
-                         _get(toml_path, config, "assignment", "notebook", str, f"{name}.ipynb"))
+    form = _get(toml_path, config, "assignment", "format", str, "numgrade")
+    if form not in ("numgrade", "nbgrader"):
+        raise AssignmentError(f"{toml_path}: [assignment] format must be 'numgrade' or "
+                              f"'nbgrader'; got {form!r}.")
+    named = _get(toml_path, config, "assignment", "notebook", str, None)
+    parts = nbgrader_parts(root, first=named) if form == "nbgrader" else None
+    default = parts.notebooks[0].name if parts is not None else f"{name}.ipynb"
+    notebook = _notebook(root, toml_path, named or default)
     data = _data_files(root, toml_path, _string_list(toml_path, config, "assignment", "data"))
     public, hidden = _checks(root, "public"), _checks(root, "hidden")
-    if not public and not hidden:
+    if not public and not hidden and (parts is None or not (parts.cell_tests or parts.manual_cells)):
         raise AssignmentError(
             f"{root} has no checks: add test_*.py files under checks/public/ (released to "
-            "students) or checks/hidden/ (kept back).")
+            "students) or checks/hidden/ (kept back)"
+            + (", or autograder test cells with points to the notebooks." if parts else "."))
     timeouts, limits = _limits(toml_path, config)
-    return Assignment(
-        name=name, title=title, root=root, notebook=notebook, data_files=data,
-        public_checks=public, hidden_checks=hidden, rules=_rules(toml_path, config),
-        notebook_timeout=timeouts["notebook_timeout"], call_timeout=timeouts["call_timeout"],
-        limits=limits, checks_digest=checks_digest(root))
+    extra: dict[str, Any] = {}
+    if parts is not None:
+        extra = {"notebooks": parts.notebooks, "cell_tests": parts.cell_tests,
+                 "manual_cells": parts.manual_cells,
+                 "data_files": tuple(sorted(set(data) | set(parts.extra_files)))}
+    return Assignment(**{
+        "name": name, "title": title, "root": root, "notebook": notebook, "data_files": data,
+        "public_checks": public, "hidden_checks": hidden, "rules": _rules(toml_path, config),
+        "notebook_timeout": timeouts["notebook_timeout"],
+        "call_timeout": timeouts["call_timeout"], "limits": limits,
+        "checks_digest": checks_digest(root), **extra})
 
 
 def _name(root: Path, toml_path: Path, config: dict[str, Any]) -> str:
@@ -422,7 +461,7 @@ def checks_digest(root: Path) -> str:
     Each file contributes its path relative to ``root`` and the digest of its
     bytes, in order of path; caches (``__pycache__``, ``*.pyc``) are skipped.
     """
-    files = [root / _TOML] + [
+    files = [root / _TOML] * (root / _TOML).is_file() + [
         p for p in (root / "checks").rglob("*")
         if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"
     ]
