@@ -44,6 +44,7 @@ from typing import Any
 import autograder
 from autograder.engine.celltests import CellTest
 from autograder.engine.forbidden import Rules
+from autograder.engine.otter_format import otter_parts
 from autograder.errors import AssignmentError
 
 __all__ = [
@@ -60,7 +61,7 @@ SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
                   "file_size_bytes", "output_bytes")
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
 _ALLOWED = {
-    "assignment": ("name", "title", "notebook", "data"),
+    "assignment": ("name", "title", "notebook", "data", "requirements"),
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
 }
@@ -308,7 +309,9 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
                          _get(toml_path, config, "assignment", "notebook", str, f"{name}.ipynb"))
     data = _data_files(root, toml_path, _string_list(toml_path, config, "assignment", "data"))
     public, hidden = _checks(root, "public"), _checks(root, "hidden")
-    if not public and not hidden:
+    cell_tests, requirements = otter_parts(root, notebook) or ((), ())
+    requirements = _string_list(toml_path, config, "assignment", "requirements") + requirements
+    if not public and not hidden and not cell_tests:
         raise AssignmentError(
             f"{root} has no checks: add test_*.py files under checks/public/ (released to "
             "students) or checks/hidden/ (kept back).")
@@ -317,7 +320,8 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
         name=name, title=title, root=root, notebook=notebook, data_files=data,
         public_checks=public, hidden_checks=hidden, rules=_rules(toml_path, config),
         notebook_timeout=timeouts["notebook_timeout"], call_timeout=timeouts["call_timeout"],
-        limits=limits, checks_digest=checks_digest(root))
+        limits=limits, checks_digest=checks_digest(root), cell_tests=cell_tests,
+        requirements=requirements)
 
 
 def _name(root: Path, toml_path: Path, config: dict[str, Any]) -> str:
