@@ -31,6 +31,8 @@ from autograder.engine.forbidden import (
 from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
+from autograder.engine.otter_format import checker_tests, is_otter_notebook, read_otter
+from autograder.engine.requirements import check_requirements
 from autograder.engine.student_process import NotebookRun, StudentProcess
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
@@ -183,6 +185,10 @@ class Grader:
         #: assignment digest they were collected at (a new session when it changes)
         self._checks: CheckSuite | None = None
         self._checks_digest = ""
+        self._requirements_ok = False
+        #: public tests for grader.check, when the notebook is otter's (never the hidden ones)
+        self._otter = (checker_tests(read_otter(assignment.notebook))
+                       if is_otter_notebook(assignment.notebook) else None)
         self._slot = started_slot if started_slot is not None else GradingSlot(slot=slot, scratch=scratch)
 
     def __enter__(self) -> "Grader":
@@ -208,6 +214,31 @@ class Grader:
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass
+
+    def check_requirements(self) -> None:
+        """Raise :class:`AssignmentError` unless every requirement imports in the worker.
+
+        Runs once per grader, before its first submission: a ``import`` of each
+        required package's modules, in a sandboxed worker like a submission's (see
+        :mod:`autograder.engine.requirements`).
+        """
+        if self.assignment.requirements and not self._requirements_ok:
+            check_requirements(self.assignment.requirements, self._run_probe,
+                               where=f"The assignment {self.assignment.name!r}")
+            self._requirements_ok = True
+
+    def _run_probe(self, cells: list[tuple[int, str]]) -> list[tuple[bool, str]]:
+        session = StudentProcess(
+            slot=self._slot, cells=cells, data_files=(), policy=self.policy,
+            notebook_timeout=self.assignment.notebook_timeout, exclude=self._excluded_paths(),
+            forbid=self.assignment.rules.to_wire())
+        try:
+            run = session.start()
+        finally:
+            session.close()
+        ran = {c.index: c for c in run.cells}
+        return [(ran[i].ok, f"{ran[i].ename}: {ran[i].evalue}") if i in ran
+                else (False, "the worker stopped before it ran") for i, _ in cells]
 
     def close(self) -> None:
         try:
@@ -278,7 +309,7 @@ class Grader:
             slot=self._slot, cells=cells, data_files=self._data_files(), policy=policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
             cpu_budget=budget,
-            forbid=self.assignment.rules.to_wire())
+            forbid=self.assignment.rules.to_wire(), otter=self._otter)
         # The checks are collected while a warm worker that is not running yet (the
         # first submission, or after a crash) starts and imports its libraries.
         self._slot.start(wait=False)
