@@ -38,10 +38,9 @@ from pathlib import Path
 from typing import Any
 
 import nbformat
-import yaml
 
 from autograder.engine.celltests import CellTest
-from autograder.errors import AssignmentError
+from autograder.errors import AssignmentError, UsageError
 
 __all__ = ["OtterCase", "OtterQuestion", "OtterNotebook", "is_otter_notebook", "read_otter",
            "case_points", "otter_cell_tests", "checker_tests", "read_requirements_file",
@@ -99,6 +98,17 @@ class OtterNotebook:
 
 
 # -- recognising and reading -------------------------------------------------------
+
+def _yaml() -> Any:
+    """PyYAML, imported when an otter notebook is read (the student's install has none)."""
+    try:
+        import yaml
+    except ImportError:
+        raise UsageError("Reading an otter-grader assignment needs PyYAML, which is not "
+                         "installed: python -m pip install \"numgrade[instructor]\" (or "
+                         "python -m pip install pyyaml).") from None
+    return yaml
+
 
 def _first_line(cell: Any) -> str:
     lines = str(cell.get("source", "")).splitlines()
@@ -184,6 +194,7 @@ class _Parser:
 
     def yaml(self, number: int, cell: Any, what: str) -> dict[str, Any]:
         text = "\n".join(str(cell.get("source", "")).splitlines()[1:])
+        yaml = _yaml()
         try:
             value = yaml.safe_load(text) if text.strip() else {}
         except yaml.YAMLError as exc:
@@ -261,6 +272,7 @@ class _Parser:
             if end is None:
                 raise self.error(number, "the TEST CONFIG block has no '\"\"\" # END TEST CONFIG' "
                                          "line; add it.")
+            yaml = _yaml()
             try:
                 config = yaml.safe_load("\n".join(lines[1:end])) or {}
             except yaml.YAMLError as exc:

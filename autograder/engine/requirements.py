@@ -23,11 +23,12 @@ import shlex
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
-from packaging.requirements import InvalidRequirement, Requirement
+from autograder.errors import AssignmentError, UsageError
 
-from autograder.errors import AssignmentError
+if TYPE_CHECKING:
+    from packaging.requirements import Requirement
 
 __all__ = ["Needed", "parse_requirements", "check_installed", "probe_cells", "check_requirements"]
 
@@ -48,6 +49,11 @@ class Needed:
 
 def parse_requirements(texts: Sequence[str], *, where: str) -> tuple[Requirement, ...]:
     """Each text as a :class:`packaging.requirements.Requirement`; a bad one names ``where``."""
+    try:  # here: only an assignment with requirements needs it
+        from packaging.requirements import InvalidRequirement, Requirement
+    except ImportError:
+        raise UsageError("Checking an assignment's requirements needs the 'packaging' "
+                         "library: python -m pip install packaging.") from None
     parsed = []
     for text in texts:
         try:
