@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import autograder
-from autograder.engine.celltests import CellTest
+from autograder.engine.celltests import CellTest, ManualCell
 from autograder.engine.forbidden import Rules
 from autograder.engine.otter_format import otter_parts
 from autograder.errors import AssignmentError
@@ -103,6 +103,8 @@ class Assignment:
         ``(notebook,)``.
     cell_tests : tuple of CellTest
         Tests written as notebook cells (nbgrader or otter courses).
+    manual_cells : tuple of ManualCell
+        Cells a person grades (nbgrader's manually graded answers and tasks).
     requirements : tuple of str
         Extra packages the student's code needs (pip requirement strings).
     """
@@ -122,6 +124,7 @@ class Assignment:
     notebooks: tuple[Path, ...] = ()
     cell_tests: tuple[CellTest, ...] = ()
     requirements: tuple[str, ...] = ()
+    manual_cells: tuple[ManualCell, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.notebooks:

@@ -28,7 +28,14 @@ from autograder.engine.forbidden import (
     scan_sources,
     warm_up,
 )
-from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
+from autograder.engine.celltests import (
+    CellReport,
+    CellTest,
+    manual_result,
+    place_cell_tests,
+    score_cell_tests,
+)
+from autograder.engine.notebook import Notebook, locked_cells, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
 from autograder.engine.otter_format import checker_tests, is_otter_notebook, read_otter
@@ -180,7 +187,7 @@ class Grader:
         self.assignment = assignment
         self.options = options or GradingOptions()
         self.policy = policy_for(assignment, self.options)
-        self._locked = locked_sources(assignment.notebook)
+        self._locked = {nb.name: locked_cells(nb) for nb in assignment.notebooks}
         #: the checks, collected once and run for every submission, and the
         #: assignment digest they were collected at (a new session when it changes)
         self._checks: CheckSuite | None = None
@@ -208,8 +215,9 @@ class Grader:
         """
         self._slot.start(wait=False)
         try:
-            self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0, None),
-                                assignment_digest(self.assignment))
+            if self.check_files:
+                self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0,
+                                                  None), assignment_digest(self.assignment))
             warm_up(self.assignment.rules)  # imports IPython's transformer meanwhile too
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
@@ -261,42 +269,111 @@ class Grader:
     # -- the unit of work ----------------------------------------------------
     def grade(self, path: Path, *, id: str | None = None,
               out_dir: Path | None = None) -> SubmissionResult:
-        """Grade ``path``; write the result folder ``out_dir`` when it is given."""
+        """Grade ``path``; write the result folder ``out_dir`` when it is given.
+
+        ``path`` is the student's notebook, or, for an assignment of several
+        notebooks, a folder holding them under the assignment's file names. Each
+        notebook runs in its own worker process; the result sums their points.
+        """
         start = time.perf_counter()
         sub_id = id or Path(path).stem
-        raw_sha = _file_sha256(path)
+        raw_sha = _submission_sha256(Path(path))
         digest = assignment_digest(self.assignment)
         key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
         seed = submission_seed(self.assignment, sub_id)
-        try:
-            _require_regular_file(Path(path))
-            notebook: Notebook | None = restore_locked(
-                read_notebook(path, max_bytes=self.options.max_notebook_bytes), self._locked)
-            problem = ""
-        except NotebookError as exc:
-            notebook, problem = None, str(exc)
-        if notebook is not None:
-            result = self._grade_notebook(notebook, seed, out_dir, digest)
-        else:
-            result = self._grade_unreadable(problem, seed, out_dir, digest)
+        files = submitted_notebooks(self.assignment, Path(path))
+        several = len(self.assignment.notebooks) > 1
+        parts = [(nb.name, self._grade_part(nb.name, files.get(nb.name), seed, out_dir, digest,
+                                            section=nb.name if several else None))
+                 for nb in self.assignment.notebooks]
+        result = _combined(self.assignment.name, parts, seed)
         result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
                          execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
         if out_dir is not None:
             write_submission(out_dir, result, title=self.assignment.title)
         return result
 
+    def _grade_part(self, name: str, path: Path | None, seed: int, out_dir: Path | None,
+                    digest: str, *, section: str | None) -> SubmissionResult:
+        """One notebook of the submission (a whole submission when there is one)."""
+        runs_checks = name == self.assignment.notebook.name
+        try:
+            if path is None:
+                raise NotebookError(f"The notebook {name!r} is missing from your submission; "
+                                    "hand in every notebook of the assignment under its "
+                                    "released name.", kind="unreadable")
+            _require_regular_file(Path(path))
+            notebook: Notebook | None = restore_locked(
+                read_notebook(path, max_bytes=self.options.max_notebook_bytes),
+                self._locked[name])
+            problem = ""
+        except NotebookError as exc:
+            notebook, problem = None, str(exc)
+        if notebook is not None:
+            part = self._grade_notebook(notebook, seed, out_dir, digest, name=name,
+                                        runs_checks=runs_checks)
+        else:
+            part = self._grade_unreadable(problem, seed, out_dir, digest, name=name,
+                                          runs_checks=runs_checks)
+        return _in_section(part, section)
+
+    def _cell_tests(self, name: str) -> list[CellTest]:
+        return [t for t in self.assignment.cell_tests if t.notebook == name]
+
     def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None,
-                          digest: str) -> SubmissionResult:
+                          digest: str, *, name: str, runs_checks: bool) -> SubmissionResult:
         message = f"This file could not be graded: {problem}"
-        tests = self._run_checks(_Unreadable(message), (), {}, seed, out_dir, digest)
-        return _result(self.assignment.name, "ungradable", message, tests, seed)
+        tests = (self._run_checks(_Unreadable(message), (), {}, seed, out_dir, digest)
+                 if runs_checks and self.check_files else ())
+        placed = place_cell_tests([], self._cell_tests(name), end=0)
+        cell_tests = score_cell_tests(placed, [])
+        return _result(self.assignment.name, "ungradable", message,
+                       cell_tests + tests + self._manual(name), seed)
+
+    def _manual(self, name: str) -> tuple[CheckResult, ...]:
+        return tuple(manual_result(m) for m in self.assignment.manual_cells if m.notebook == name)
 
     def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None,
-                        digest: str) -> SubmissionResult:
-        cells = [(c.index, c.source) for c in notebook.cells]
+                        digest: str, *, name: str, runs_checks: bool) -> SubmissionResult:
         sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
         report = scan_sources(self.assignment.rules, sources)
         forbidden = forbidden_functions(self.assignment.rules, sources, numbers, report)
+        placed = place_cell_tests([(c.index, c.source, c.grade_id) for c in notebook.cells],
+                                  self._cell_tests(name), end=notebook.end)
+        session = self._session(placed.cells, out_dir)
+        runs_checks = runs_checks and bool(self.check_files)
+        # The checks are collected while a warm worker that is not running yet (the
+        # first submission, or after a crash) starts and imports its libraries.
+        self._slot.start(wait=False)
+        if runs_checks:
+            self._check_session(self._context(session, (), forbidden, seed, out_dir), digest)
+        # This thread and the child take turns (a call waits for its answer): on the
+        # slot's core, a message does not have to wake another core (autograder.sandbox.affinity).
+        with affinity.on_core(self._slot.core):
+            try:
+                run = session.start()
+                tests = (self._run_checks(session, run.functions, forbidden, seed, out_dir,
+                                          digest) if runs_checks else ())
+            finally:
+                session.close()
+        cell_tests = score_cell_tests(
+            placed, [CellReport(c.index, c.ok, c.ename, c.evalue, c.traceback) for c in run.cells],
+            timed_out=run.timed_out_cells, crashed=run.crashed_cells)
+        # what the student's own cells did: the test cells are reported as checks above
+        run = without_cells(run, placed.test_indices)
+        outcome = ("timeout" if run.timed_out_cells else
+                   "crashed" if run.crashed or run.crashed_cells else "graded")
+        result = _result(self.assignment.name, outcome, summarise_run(run, notebook),
+                         cell_tests + tests + self._manual(name), seed)
+        return replace(result, stdout=run.stdout,
+                       notes=(tuple(run.notes) + tuple(notebook.warnings) + placed.notes
+                              + review_notes(report, numbers)),
+                       cpu_seconds=round(session.cpu_seconds, 3),
+                       cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
+                                         for c in run.cells if not c.ok))
+
+    def _session(self, cells: Sequence[tuple[int, str]], out_dir: Path | None) -> StudentProcess:
+        """A fresh sandboxed process for one notebook's cells."""
         notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
         call_timeout = self.options.call_timeout or self.assignment.call_timeout
         budget = self.options.cpu_budget or notebook_timeout + 20 * call_timeout
@@ -305,32 +382,10 @@ class Grader:
         limits = self.policy.limits
         policy = replace(self.policy, limits=replace(
             limits, cpu_seconds=max(limits.cpu_seconds, int(budget) + 5)))
-        session = StudentProcess(
-            slot=self._slot, cells=cells, data_files=self._data_files(), policy=policy,
+        return StudentProcess(
+            slot=self._slot, cells=list(cells), data_files=self._data_files(), policy=policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
-            cpu_budget=budget,
-            forbid=self.assignment.rules.to_wire(), otter=self._otter)
-        # The checks are collected while a warm worker that is not running yet (the
-        # first submission, or after a crash) starts and imports its libraries.
-        self._slot.start(wait=False)
-        self._check_session(self._context(session, (), forbidden, seed, out_dir), digest)
-        # This thread and the child take turns (a call waits for its answer): on the
-        # slot's core, a message does not have to wake another core (autograder.sandbox.affinity).
-        with affinity.on_core(self._slot.core):
-            try:
-                run = session.start()
-                tests = self._run_checks(session, run.functions, forbidden, seed, out_dir,
-                                         digest)
-            finally:
-                session.close()
-        outcome = ("timeout" if run.timed_out_cells else
-                   "crashed" if run.crashed or run.crashed_cells else "graded")
-        result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)
-        return replace(result, stdout=run.stdout,
-                       notes=tuple(run.notes) + tuple(notebook.warnings) + review_notes(report, numbers),
-                       cpu_seconds=round(session.cpu_seconds, 3),
-                       cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
-                                         for c in run.cells if not c.ok))
+            cpu_budget=budget, forbid=self.assignment.rules.to_wire(), otter=self._otter)
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
                     seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:
@@ -409,6 +464,72 @@ def summarise_run(run: NotebookRun, notebook: Notebook) -> str:
         parts.append("The worker running your notebook stopped (it exited, or hit a memory "
                      "or CPU limit); checks that needed it were scored zero.")
     return " ".join(parts)
+
+
+def without_cells(run: NotebookRun, indices: frozenset[int]) -> NotebookRun:
+    """``run`` as the student's own cells ran: the test cells at ``indices`` left out."""
+    return replace(run, cells=tuple(c for c in run.cells if c.index not in indices),
+                   timed_out_cells=tuple(i for i in run.timed_out_cells if i not in indices),
+                   crashed_cells=tuple(i for i in run.crashed_cells if i not in indices))
+
+
+def submitted_notebooks(assignment: Assignment, path: Path) -> dict[str, Path]:
+    """Assignment notebook name -> the student's file, for a file or a folder.
+
+    A file is the first notebook whatever its name (a single-notebook assignment's
+    usual case). A folder holds the notebooks under their released names; with one
+    notebook, a folder holding a single ``.ipynb`` of another name is taken too.
+    """
+    first = assignment.notebooks[0].name
+    if not path.is_dir() or path.is_symlink():
+        return {first: path}
+    found = {nb.name: path / nb.name for nb in assignment.notebooks
+             if os.path.lexists(path / nb.name)}
+    if not found and len(assignment.notebooks) == 1:
+        candidates = sorted(path.glob("*.ipynb"))
+        if len(candidates) == 1:
+            found[first] = candidates[0]
+    return found
+
+
+def _submission_sha256(path: Path) -> str:
+    """The file's SHA-256, or over a folder's files (relative path and contents)."""
+    if not path.is_dir() or path.is_symlink():
+        return _file_sha256(path)
+    digest = hashlib.sha256()
+    for file in sorted(p for p in path.rglob("*") if p.is_file()):
+        digest.update(file.relative_to(path).as_posix().encode() + b"\0")
+        digest.update(_file_sha256(file).encode())
+    return digest.hexdigest()
+
+
+def _in_section(part: SubmissionResult, section: str | None) -> SubmissionResult:
+    """``part`` with its checks and cell errors marked as belonging to notebook ``section``."""
+    if section is None:
+        return part
+    return replace(part, tests=tuple(replace(t, notebook=section) for t in part.tests),
+                   cell_errors=tuple(replace(e, notebook=section) for e in part.cell_errors))
+
+
+_WORST = ("error", "crashed", "timeout", "graded")
+
+
+def _combined(assignment: str, named: list[tuple[str, SubmissionResult]],
+              seed: int) -> SubmissionResult:
+    """One result of the notebooks of a submission, their points summed."""
+    if len(named) == 1:
+        return named[0][1]
+    parts = [p for _, p in named]
+    outcomes = {p.outcome for p in parts}
+    outcome: Any = ("ungradable" if outcomes == {"ungradable"} else
+                    next(o for o in _WORST if o in outcomes or o == "graded"))
+    output = "\n".join(f"{name}: {p.output}" for name, p in named)
+    stdout = "".join(f"--- {name} ---\n{p.stdout}" for name, p in named if p.stdout)
+    return replace(_result(assignment, outcome, output,
+                           tuple(t for p in parts for t in p.tests), seed),
+                   stdout=stdout, notes=tuple(f"{name}: {n}" for name, p in named for n in p.notes),
+                   cell_errors=tuple(e for p in parts for e in p.cell_errors),
+                   cpu_seconds=round(sum(p.cpu_seconds for p in parts), 3))
 
 
 def _result(assignment: str, outcome: Any, output: str, tests: tuple[CheckResult, ...],

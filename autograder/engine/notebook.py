@@ -40,7 +40,7 @@ import copy
 import hashlib
 import json
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +55,8 @@ __all__ = [
     "parse_notebook",
     "read_notebook",
     "code_sources",
+    "LockedCells",
+    "locked_cells",
     "locked_sources",
     "restore_locked",
     "MAX_NOTEBOOK_BYTES",
@@ -151,6 +153,11 @@ class Notebook:
     language: str
     sha256: str
     warnings: tuple[str, ...] = ()
+
+    @property
+    def end(self) -> int:
+        """An index past every code cell (where tests of deleted cells are put)."""
+        return max((c.index for c in self.cells), default=-1) + 1
 
     @property
     def is_empty(self) -> bool:
@@ -466,42 +473,107 @@ def _one_line(value: object, limit: int = 160) -> str:
 
 # -- locked cells --------------------------------------------------------------
 
-def locked_sources(instructor: str | Path) -> dict[str, str]:
-    """``grade_id -> source`` of the instructor notebook's locked read-only code cells.
+@dataclass(frozen=True)
+class LockedCells:
+    """The instructor notebook's locked code cells, and where they sit.
 
-    These are the cells nbgrader marks ``locked`` that are neither solution nor
-    test cells (helpers, imports, data loading): the release leaves their source
-    unchanged, so the instructor's copy is the released one. Test cells are left
-    out on purpose: their instructor version holds hidden tests.
+    Attributes
+    ----------
+    sources : dict of str to str
+        ``grade_id -> source`` of the locked read-only cells that are neither
+        solution nor test cells (helpers, imports, data loading): the release
+        leaves their source unchanged, so the instructor's copy is the released
+        one. Test cells are left out on purpose: their instructor version holds
+        hidden tests (they are run by :mod:`autograder.engine.celltests`).
+    tests : frozenset of str
+        ``grade_id`` of the locked test cells (``grade`` and not ``solution``).
+    order : tuple of str
+        ``grade_id`` of every code cell of the instructor notebook, in order: the
+        anchors that say where a locked cell belongs in a student's notebook.
+    cell_ids : dict of str to str
+        ``grade_id -> cell id`` (nbformat 4.5) of the locked cells, where known: a
+        student's cell keeps its id when its metadata is removed.
     """
+
+    sources: dict[str, str]
+    tests: frozenset[str] = frozenset()
+    order: tuple[str, ...] = ()
+    cell_ids: dict[str, str] = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return bool(self.sources or self.tests)
+
+
+def locked_sources(instructor: str | Path) -> dict[str, str]:
+    """``grade_id -> source`` of the instructor notebook's locked read-only code cells."""
+    return locked_cells(instructor).sources
+
+
+def locked_cells(instructor: str | Path) -> LockedCells:
+    """The :class:`LockedCells` of the instructor notebook ``instructor``."""
     nb = nbformat.read(str(instructor), as_version=4)
-    found: dict[str, str] = {}
+    sources: dict[str, str] = {}
+    tests: set[str] = set()
+    order: list[str] = []
+    cell_ids: dict[str, str] = {}
     for cell in nb.cells:
         meta = cell.get("metadata", {}).get("nbgrader", {})
-        if (cell.get("cell_type") == "code" and meta.get("locked") and not meta.get("solution")
-                and not meta.get("grade") and isinstance(meta.get("grade_id"), str)):
-            found[meta["grade_id"]] = _source_text(cell.get("source", ""), 0)
-    return found
+        grade_id = meta.get("grade_id")
+        if cell.get("cell_type") != "code" or not isinstance(grade_id, str):
+            continue
+        order.append(grade_id)
+        if not meta.get("locked") or meta.get("solution"):
+            continue
+        if isinstance(cell.get("id"), str):
+            cell_ids[grade_id] = cell["id"]
+        if meta.get("grade"):
+            tests.add(grade_id)
+        else:
+            sources[grade_id] = _source_text(cell.get("source", ""), 0)
+    return LockedCells(sources=sources, tests=frozenset(tests), order=tuple(order),
+                       cell_ids=cell_ids)
 
 
-def restore_locked(nb: Notebook, locked: dict[str, str]) -> Notebook:
+def restore_locked(nb: Notebook, locked: LockedCells | dict[str, str]) -> Notebook:
     """``nb`` with every locked cell's source put back as released (nbgrader's OverwriteCells).
 
-    A changed or missing locked cell is named in the notebook's warnings, which
-    the feedback page shows.
+    A locked cell is matched by ``grade_id`` (or by its cell id, which survives a
+    student removing the metadata) *and* by position: when several of the student's
+    cells claim the same locked cell, the one whose place among the other graded
+    cells matches the instructor notebook's is the one restored (a tie goes to the
+    edited one, so edited code never runs under a locked cell's name); the others
+    lose the ``grade_id`` and run as the student's own cells, and a note names them.
+    Afterwards at most one cell carries each locked ``grade_id``. A changed or
+    missing locked cell is named in the notebook's warnings, which the feedback
+    page shows.
     """
+    if isinstance(locked, dict):
+        locked = LockedCells(sources=locked)
     if not locked:
         return nb
+    chosen, duplicates = _match_locked(nb.cells, locked)
     cells, changed = [], []
-    for cell in nb.cells:
-        original = locked.get(cell.grade_id or "")
+    for position, cell in enumerate(nb.cells):
+        grade_id = chosen.get(position)
+        if grade_id is None:
+            if cell.grade_id in locked.sources or cell.grade_id in locked.tests:
+                cell = replace(cell, grade_id=None)  # a duplicate: the student's own cell
+            cells.append(cell)
+            continue
+        original = locked.sources.get(grade_id)
         if original is not None and original != cell.source:
-            changed.append(cell.grade_id or "")
-            cell = replace(cell, source=original)
-        cells.append(cell)
-    present = {cell.grade_id for cell in nb.cells}
-    missing = sorted(gid for gid in locked if gid not in present and locked[gid].strip())
-    warnings = list(nb.warnings)
+            changed.append(grade_id)
+        cells.append(replace(cell, source=original if original is not None else cell.source,
+                             grade_id=grade_id))
+    present = set(chosen.values())
+    missing = sorted(gid for gid in locked.sources if gid not in present and locked.sources[gid].strip())
+    return replace(nb, cells=tuple(cells),
+                   warnings=nb.warnings + _locked_warnings(changed, missing, duplicates))
+
+
+def _locked_warnings(changed: list[str], missing: list[str], duplicates: list[str]
+                     ) -> tuple[str, ...]:
+    warnings = []
     if changed:
         warnings.append(
             "You changed read-only (locked) cell(s) " + ", ".join(f"`{g}`" for g in changed)
@@ -511,4 +583,46 @@ def restore_locked(nb: Notebook, locked: dict[str, str]) -> Notebook:
             "Read-only (locked) cell(s) " + ", ".join(f"`{g}`" for g in missing)
             + " are missing from your notebook; functions they define may be missing too. "
             "Start again from the released notebook if you deleted them.")
-    return replace(nb, cells=tuple(cells), warnings=tuple(warnings))
+    if duplicates:
+        warnings.append(
+            "Your notebook holds more than one copy of read-only (locked) cell(s) "
+            + ", ".join(f"`{g}`" for g in sorted(set(duplicates)))
+            + "; the copy where the cell was released was graded as released, the other "
+            "copies ran as your own code. A person may look at this.")
+    return tuple(warnings)
+
+
+def _match_locked(cells: tuple[Cell, ...], locked: LockedCells
+                  ) -> tuple[dict[int, str], list[str]]:
+    """``position -> grade_id`` of the student's cell restored for each locked cell,
+    and the ``grade_id`` of locked cells claimed by more than one cell."""
+    by_cell_id = {cid: gid for gid, cid in locked.cell_ids.items()}
+    claims: dict[str, list[int]] = {}
+    for position, cell in enumerate(cells):
+        for grade_id in {cell.grade_id, by_cell_id.get(cell.cell_id or "")}:
+            if grade_id in locked.sources or grade_id in locked.tests:
+                claims.setdefault(grade_id, []).append(position)  # type: ignore[arg-type]
+    seen: dict[str, list[int]] = {}
+    for position, cell in enumerate(cells):
+        if cell.grade_id is not None:
+            seen.setdefault(cell.grade_id, []).append(position)
+    chosen: dict[int, str] = {}
+    duplicates = []
+    for grade_id, positions in claims.items():
+        if len(positions) > 1:
+            duplicates.append(grade_id)
+        best = max(positions, key=lambda p: (_fit(p, grade_id, locked.order, seen),
+                                              cells[p].source != locked.sources.get(grade_id),
+                                              -p))
+        chosen[best] = grade_id
+    return chosen, duplicates
+
+
+def _fit(position: int, grade_id: str, order: tuple[str, ...], seen: dict[str, list[int]]) -> int:
+    """How many graded cells lie on the side of ``position`` the instructor notebook puts them."""
+    if grade_id not in order:
+        return 0
+    k = order.index(grade_id)
+    before = sum(1 for g in order[:k] if any(p < position for p in seen.get(g, ())))
+    after = sum(1 for g in order[k + 1:] if any(p > position for p in seen.get(g, ())))
+    return before + after

@@ -53,6 +53,7 @@ KIND_LABELS = {
     "unsupported": "answer could not be checked",
     "crashed": "your code stopped the worker", "forbidden": "uses something not allowed",
     "check-error": "the check could not use your answer",
+    "needs-person": "waits for a person",
 }
 
 

@@ -39,6 +39,8 @@ class CheckResult:
     kind: str = "ok"  # ok | wrong | partial | exception | missing | timeout | not-run | unsupported | crashed | forbidden | check-error
     dataset: str | None = None
     attachments: tuple[Attachment, ...] = ()
+    #: the assignment notebook the check belongs to, when an assignment has several
+    notebook: str | None = None
 
     @property
     def status(self) -> Status:
@@ -59,6 +61,8 @@ class CheckResult:
             "extra_data": {"kind": self.kind, "hidden": self.hidden, "dataset": self.dataset,
                            "attachments": [a.to_dict() for a in self.attachments]},
         }
+        if self.notebook is not None:
+            entry["extra_data"]["notebook"] = self.notebook
         return entry
 
     @classmethod
@@ -67,7 +71,7 @@ class CheckResult:
         return cls(name=data["name"], score=float(data["score"]),
                    max_score=float(data["max_score"]), output=data.get("output", ""),
                    hidden=bool(extra.get("hidden", False)), kind=extra.get("kind", "ok"),
-                   dataset=extra.get("dataset"),
+                   dataset=extra.get("dataset"), notebook=extra.get("notebook"),
                    attachments=tuple(Attachment(**a) for a in extra.get("attachments", [])))
 
 
@@ -79,10 +83,15 @@ class CellError:
     ename: str
     evalue: str
     traceback: str
+    #: the assignment notebook, when an assignment has several
+    notebook: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return {"cell": self.cell, "ename": self.ename, "evalue": self.evalue,
-                "traceback": self.traceback}
+        entry = {"cell": self.cell, "ename": self.ename, "evalue": self.evalue,
+                 "traceback": self.traceback}
+        if self.notebook:
+            entry["notebook"] = self.notebook
+        return entry
 
 
 @dataclass(frozen=True)
