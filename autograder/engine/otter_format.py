@@ -405,16 +405,20 @@ def doctest_text(case: OtterCase) -> str:
 
 
 # The OK-format case in the student's namespace, run as otter's ``run_doctest`` does
-# (a DocTest over the globals, not cleared), raising when an example fails.
+# (a DocTest over the globals, not cleared, its stdout and stderr captured), raising
+# when an example fails. What the test writes to stderr (a warning) is otter's
+# business of the report, never a failure: the cell-test wrapper's nbgrader rule
+# (stderr means zero) must not apply to otter's tests.
 _DOCTEST_RUNNER = '''\
 def _numgrade_otter_case(text, name):
-    import doctest, io
+    import contextlib, doctest, io
     examples = [e for e in doctest.DocTestParser().parse(text, name)
                 if isinstance(e, doctest.Example)]
     test = doctest.DocTest(examples, globals(), name, None, None, text)
     runner = doctest.DocTestRunner(verbose=False)
     report = io.StringIO()
-    runner.run(test, out=report.write, clear_globs=False)
+    with contextlib.redirect_stdout(report), contextlib.redirect_stderr(report):
+        runner.run(test, out=report.write, clear_globs=False)
     if runner.failures:
         raise AssertionError("Test case failed\\n" + report.getvalue())
 try:
@@ -423,14 +427,16 @@ finally:
     del _numgrade_otter_case
 '''
 
-# The exception-format case: otter's ``test_case.call_func``.
+# The exception-format case: otter's ``test_case.call_func`` (stderr kept away from
+# the cell-test wrapper's nbgrader rule, as above).
 _CALL_RUNNER = '''\
 {source}
 def _numgrade_otter_call(function):
-    import inspect
+    import contextlib, inspect, io
     env = globals()
-    function(**{{arg: (env if arg == "env" else env.get(arg))
-                for arg in inspect.signature(function).parameters}})
+    with contextlib.redirect_stderr(io.StringIO()):
+        function(**{{arg: (env if arg == "env" else env.get(arg))
+                    for arg in inspect.signature(function).parameters}})
 try:
     _numgrade_otter_call({function})
 finally:
