@@ -187,8 +187,13 @@ def test_release_refuses_a_hidden_test_copied_into_public_data(tmp_path: Path) -
         release(load_assignment(folder), tmp_path / "release")
 
 
-def test_hidden_tests_do_not_enter_the_worker_before_grading(tmp_path: Path) -> None:
-    """A student cell that searches the worker's memory for the hidden cases finds none."""
+def test_grader_check_stand_in_holds_no_hidden_test(tmp_path: Path) -> None:
+    """A student cell that walks everything the ``otter`` stand-in holds finds no hidden case.
+
+    (The cell tests themselves, hidden ones included, are sent with the notebook's
+    cells and run in the student's process, as in otter: docs/security.md, "Not
+    covered".)
+    """
     folder = write_assignment(tmp_path, master_notebook())
     nb = fill(nbformat.read(release(load_assignment(folder), tmp_path / "release"), 4),
               STUDENTS["bob"])
@@ -196,8 +201,17 @@ def test_hidden_tests_do_not_enter_the_worker_before_grading(tmp_path: Path) -> 
     nb.cells.append(new_code_cell(
         "import gc, sys\n"
         f"needles = ({needles},)\n"
-        "seen = [n for o in gc.get_objects() for r in gc.get_referents(o)\n"
-        "        if isinstance(r, str) for n in needles if n in r and r != n]\n"
+        "# everything reachable from the otter stand-in (untracked dicts and tuples too)\n"
+        "todo, done, seen = [sys.modules['otter']], set(), []\n"
+        "while todo:\n"
+        "    o = todo.pop()\n"
+        "    if id(o) in done:\n"
+        "        continue\n"
+        "    done.add(id(o))\n"
+        "    if isinstance(o, str):\n"
+        "        seen += [n for n in needles if n in o and o != n]\n"
+        "    elif not isinstance(o, (int, float, bytes, type(None))):\n"
+        "        todo.extend(gc.get_referents(o))\n"
         "print('HIDDEN-SEEN' if seen else 'HIDDEN-UNSEEN', 'otter' in sys.modules)"))
     (tmp_path / "subs").mkdir()
     nbformat.write(nb, tmp_path / "subs" / "mallory.ipynb")
