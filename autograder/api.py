@@ -20,9 +20,14 @@ if TYPE_CHECKING:
     from autograder.results.merge import MergeRun
 
 
-def resolve_assignment(spec: str | Path | Assignment) -> Assignment:
-    """An :class:`Assignment` from a name under ``assignments/``, a folder, or itself."""
-    return spec if isinstance(spec, Assignment) else load_assignment(spec)
+def resolve_assignment(spec: str | Path | Assignment, *, course: Path | None = None) -> Assignment:
+    """An :class:`Assignment` from a name under ``assignments/``, a folder, or itself.
+
+    ``course``: an nbgrader course root, where a name is a folder under ``source/``.
+    """
+    if isinstance(spec, Assignment):
+        return spec
+    return load_assignment(spec, search_root=course) if course is not None else load_assignment(spec)
 
 
 def release(assignment: str | Path | Assignment, *, out: Path) -> Path:

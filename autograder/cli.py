@@ -22,6 +22,11 @@ if TYPE_CHECKING:
     from autograder.runners.jobs import DaskSpec, TLSFiles
 
 
+#: ``--course``, shared by ``grade`` and ``release``
+_COURSE_HELP = ("an nbgrader course root (nbgrader_config.py, source/, submitted/): the "
+                "assignment is the folder source/<assignment>")
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -52,10 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
     rel = commands.add_parser("release", help="write the student version of an assignment")
     rel.add_argument("assignment", help="a folder name under assignments/ or a path to one")
     rel.add_argument("--out", type=Path, required=True, help="folder to write the student version to")
+    rel.add_argument("--course", type=Path, default=None, metavar="ROOT", help=_COURSE_HELP)
 
     grd = commands.add_parser("grade", help="grade submitted notebooks with every check")
     grd.add_argument("assignment", help="a folder name under assignments/ or a path to one")
-    grd.add_argument("submissions", nargs="+", type=Path, help="notebooks, or folders of notebooks")
+    grd.add_argument("submissions", nargs="*", type=Path,
+                     help="notebooks, or folders of notebooks (with --course: default ROOT/submitted)")
+    grd.add_argument("--course", type=Path, default=None, metavar="ROOT", help=_COURSE_HELP)
     grd.add_argument("--out", type=Path, required=True, help="folder for results.json files and grades.csv")
     grd.add_argument("--jobs", type=_positive_int, default=None,
                      help=f"submissions graded in parallel (default: number of cores, {os.cpu_count()})")
@@ -245,7 +253,12 @@ def _grade(args: argparse.Namespace) -> int:
         if args.dask is None and not quiet and sys.stderr.isatty():  # beside the progress bar
             print(f"autograder: starting up to {args.jobs or os.cpu_count() or 1} grading "
                   "worker(s); the first results follow once they are warm...", file=sys.stderr)
-        report = api.grade(args.assignment, args.submissions, out=args.out, jobs=args.jobs,
+        submissions = args.submissions or ([args.course / "submitted"] if args.course else [])
+        if not submissions:
+            raise UsageError("Give the submissions to grade (notebooks or folders), or "
+                             "--course ROOT to grade ROOT/submitted of an nbgrader course.")
+        report = api.grade(api.resolve_assignment(args.assignment, course=args.course),
+                           submissions, out=args.out, jobs=args.jobs,
                            options=_options(args), progress=False if quiet else None,
                            dask=_dask(args), shard=args.shard,
                            junit=args.junit, started_slot=started_slot)
@@ -322,7 +335,7 @@ def _validate(args: argparse.Namespace) -> int:
 def _release(args: argparse.Namespace) -> int:
     from autograder import api
 
-    path = api.release(args.assignment, out=args.out)
+    path = api.release(api.resolve_assignment(args.assignment, course=args.course), out=args.out)
     print(f"Wrote the student version to {path.parent} (notebook: {path.name}).")
     return 0
 

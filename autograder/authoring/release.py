@@ -2,8 +2,10 @@
 
 :func:`release` writes into ``out_dir``::
 
-    <name>.ipynb            the student template (no solutions, no hidden tests)
-    data/...                the public data files, at their paths relative to the folder
+    <notebook>.ipynb        the student template of each notebook, under its own name
+                            (no solutions, no hidden tests)
+    data/...                the public data files (for an nbgrader folder: every file
+                            beside the notebooks), at their paths relative to the folder
     checks/public/...       every file under checks/public/ (tests and their helpers)
     assignment.toml         name, title, notebook, data and rules, so that the
                             released folder can be loaded to run the public checks
@@ -59,12 +61,15 @@ _DISTINCTIVE = 32
 _LOG = logging.getLogger("autograder.authoring.release")
 
 
-def student_template(assignment: Assignment) -> nbformat.NotebookNode:
-    """The student version of ``assignment.notebook``, in memory.
+def student_template(assignment: Assignment, notebook: Path | None = None
+                     ) -> nbformat.NotebookNode:
+    """The student version of ``notebook`` (default: ``assignment.notebook``), in memory.
 
     Parameters
     ----------
     assignment : Assignment
+    notebook : Path, optional
+        One of ``assignment.notebooks``.
 
     Returns
     -------
@@ -91,14 +96,15 @@ def student_template(assignment: Assignment) -> nbformat.NotebookNode:
             "installed: install the instructor's extra, python -m pip install "
             "\"numgrade[instructor]\" (or -e \".[instructor]\" in a checkout).") from None
 
-    nb = _read_instructor(assignment.notebook)
+    source = notebook or assignment.notebook
+    nb = _read_instructor(source)
     resources: dict[str, Any] = {}
     for name in PREPROCESSORS:
         try:
             nb, resources = getattr(preprocessors, name)(log=_LOG).preprocess(nb, resources)
         except (RuntimeError, ValueError, MetadataError, KeyError) as exc:
             raise AssignmentError(
-                f"{assignment.notebook}: nbgrader's {name} failed: {exc}. "
+                f"{source}: nbgrader's {name} failed: {exc}. "
                 "Check the cell's nbgrader metadata (Create Assignment toolbar) and its "
                 "### BEGIN/END markers.") from None
     _verify_template(assignment, nb, where="the student template")
@@ -117,7 +123,8 @@ def release(assignment: Assignment, out_dir: Path) -> Path:
     Returns
     -------
     Path
-        ``out_dir / f"{assignment.name}.ipynb"``.
+        The first notebook written. Every notebook of the assignment is written
+        under its own file name, and every data file at its path.
 
     Raises
     ------
@@ -129,18 +136,21 @@ def release(assignment: Assignment, out_dir: Path) -> Path:
     if out_dir == assignment.root or _is_within(out_dir, assignment.root):
         raise AssignmentError(f"Release folder {out_dir} is inside the assignment folder "
                               f"{assignment.root}; choose a folder outside it.")
-    nb = student_template(assignment)
+    templates = [(out_dir / nb.name, student_template(assignment, nb))
+                 for nb in assignment.notebooks]
     out_dir.mkdir(parents=True, exist_ok=True)
-    target = out_dir / f"{assignment.name}.ipynb"
-    nbformat.write(nb, str(target), version=4)
+    for target, nb in templates:
+        nbformat.write(nb, str(target), version=4)
     copied = _copy_public_files(assignment, out_dir)
-    _write_toml(assignment, out_dir, target, copied)
+    _write_toml(assignment, out_dir, templates[0][0], copied)
     try:
-        _verify_release(assignment, out_dir, target)
+        for target, _ in templates:
+            _verify_release(assignment, out_dir, target)
     except AssignmentError:
-        target.unlink(missing_ok=True)
+        for target, _ in templates:
+            target.unlink(missing_ok=True)
         raise
-    return target
+    return templates[0][0]
 
 
 # -- reading and writing -------------------------------------------------------
@@ -191,6 +201,7 @@ def _write_toml(assignment: Assignment, out_dir: Path, notebook: Path,
         f"title = {_toml_str(assignment.title)}",
         f"notebook = {_toml_str(notebook.name)}",
         f"data = [{', '.join(_toml_str(d) for d in data)}]",
+        *(['format = "nbgrader"'] if _nbgrader_format(assignment) else []),
         "",
         "[rules]",
         f"forbid = [{', '.join(_toml_str(f) for f in assignment.rules.forbid)}]",
@@ -202,6 +213,12 @@ def _write_toml(assignment: Assignment, out_dir: Path, notebook: Path,
         *(f"{key} = {value!r}" for key, value in assignment.limits),
     ]
     (out_dir / "assignment.toml").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _nbgrader_format(assignment: Assignment) -> bool:
+    """Whether the assignment came from an nbgrader source folder (its tests are cells)."""
+    return (len(assignment.notebooks) > 1 or bool(assignment.manual_cells)
+            or any(t.grade_id is not None for t in assignment.cell_tests))
 
 
 def _toml_str(text: str) -> str:

@@ -44,6 +44,7 @@ from typing import Any
 import autograder
 from autograder.engine.celltests import CellTest, ManualCell
 from autograder.engine.forbidden import Rules
+from autograder.engine.nbgrader_source import course_source_dir, is_nbgrader_folder, nbgrader_parts
 from autograder.engine.otter_format import otter_parts
 from autograder.errors import AssignmentError
 
@@ -61,7 +62,7 @@ SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
                   "file_size_bytes", "output_bytes")
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
 _ALLOWED = {
-    "assignment": ("name", "title", "notebook", "data", "requirements"),
+    "assignment": ("name", "title", "notebook", "data", "format", "requirements"),
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
 }
@@ -155,7 +156,7 @@ def list_assignments(search_root: Path | None = None) -> list[str]:
     folder = _assignments_dir(search_root)
     if not folder.is_dir():
         return []
-    return sorted(p.name for p in folder.iterdir() if (p / _TOML).is_file())
+    return sorted(p.name for p in folder.iterdir() if _is_assignment(p))
 
 
 def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Assignment:
@@ -183,6 +184,8 @@ def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Ass
     """
     root = _find_root(spec, search_root)
     toml_path = root / _TOML
+    if not toml_path.is_file():  # an nbgrader source folder as it is
+        return _build(root, toml_path, {"assignment": {"format": "nbgrader"}})
     config = _read_toml(toml_path)
     return _build(root, toml_path, config)
 
@@ -191,7 +194,14 @@ def load_assignment(spec: str | Path, *, search_root: Path | None = None) -> Ass
 
 def _assignments_dir(search_root: Path | None) -> Path:
     base = Path(search_root) if search_root is not None else default_search_root()
-    return base / "assignments" if (base / "assignments").is_dir() else base
+    if (base / "assignments").is_dir():
+        return base / "assignments"
+    return course_source_dir(base) or base
+
+
+def _is_assignment(folder: Path) -> bool:
+    """An assignment folder: one with ``assignment.toml``, or an nbgrader source folder."""
+    return (folder / _TOML).is_file() or (folder.is_dir() and is_nbgrader_folder(folder))
 
 
 def _find_root(spec: str | Path, search_root: Path | None) -> Path:
@@ -219,10 +229,15 @@ def _looks_like_path(spec: str) -> bool:
 
 def _checked_root(path: Path) -> Path:
     root = path.resolve()
-    if not (root / _TOML).is_file():
+    if course_source_dir(root) is not None:
         raise AssignmentError(
-            f"{root} has no {_TOML}; every assignment folder needs one "
-            "(see 'An assignment folder' in docs/design.md).")
+            f"{root} is an nbgrader course root; name one of its assignments: "
+            f"'--course {root} ps1', or the folder {root / 'source' / 'ps1'} (for ps1).")
+    if not _is_assignment(root):
+        raise AssignmentError(
+            f"{root} has no {_TOML} and no nbgrader notebook; an assignment folder needs "
+            "one or the other (see 'An assignment folder' in docs/design.md, and "
+            "docs/coming-from-nbgrader-or-otter.md).")
     return root
 
 
@@ -308,23 +323,39 @@ def _string_list(path: Path, config: dict[str, Any], table: str, key: str) -> tu
 def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
     name = _name(root, toml_path, config)
     title = _get(toml_path, config, "assignment", "title", str, name)
-    notebook = _notebook(root, toml_path,
-                         _get(toml_path, config, "assignment", "notebook", str, f"{name}.ipynb"))
+    form = _get(toml_path, config, "assignment", "format", str, "numgrade")
+    if form not in ("numgrade", "nbgrader"):
+        raise AssignmentError(f"{toml_path}: [assignment] format must be 'numgrade' or "
+                              f"'nbgrader'; got {form!r}.")
+    named = _get(toml_path, config, "assignment", "notebook", str, None)
+    parts = nbgrader_parts(root, first=named) if form == "nbgrader" else None
+    default = parts.notebooks[0].name if parts is not None else f"{name}.ipynb"
+    notebook = _notebook(root, toml_path, named or default)
     data = _data_files(root, toml_path, _string_list(toml_path, config, "assignment", "data"))
     public, hidden = _checks(root, "public"), _checks(root, "hidden")
-    cell_tests, requirements = otter_parts(root, notebook) or ((), ())
-    requirements = _string_list(toml_path, config, "assignment", "requirements") + requirements
-    if not public and not hidden and not cell_tests:
+    otter = otter_parts(root, notebook) if parts is None else None  # otter's master notebook
+    requirements = (_string_list(toml_path, config, "assignment", "requirements")
+                    + (otter[1] if otter is not None else ()))
+    cells = bool(otter and otter[0]) or bool(parts and (parts.cell_tests or parts.manual_cells))
+    if not public and not hidden and not cells:
         raise AssignmentError(
             f"{root} has no checks: add test_*.py files under checks/public/ (released to "
-            "students) or checks/hidden/ (kept back).")
+            "students) or checks/hidden/ (kept back)"
+            + (", or autograder test cells with points to the notebooks." if parts else "."))
     timeouts, limits = _limits(toml_path, config)
-    return Assignment(
-        name=name, title=title, root=root, notebook=notebook, data_files=data,
-        public_checks=public, hidden_checks=hidden, rules=_rules(toml_path, config),
-        notebook_timeout=timeouts["notebook_timeout"], call_timeout=timeouts["call_timeout"],
-        limits=limits, checks_digest=checks_digest(root), cell_tests=cell_tests,
-        requirements=requirements)
+    extra: dict[str, Any] = {"requirements": requirements}
+    if otter is not None:
+        extra["cell_tests"] = otter[0]
+    if parts is not None:
+        extra.update({"notebooks": parts.notebooks, "cell_tests": parts.cell_tests,
+                      "manual_cells": parts.manual_cells,
+                      "data_files": tuple(sorted(set(data) | set(parts.extra_files)))})
+    return Assignment(**{
+        "name": name, "title": title, "root": root, "notebook": notebook, "data_files": data,
+        "public_checks": public, "hidden_checks": hidden, "rules": _rules(toml_path, config),
+        "notebook_timeout": timeouts["notebook_timeout"],
+        "call_timeout": timeouts["call_timeout"], "limits": limits,
+        "checks_digest": checks_digest(root), **extra})
 
 
 def _name(root: Path, toml_path: Path, config: dict[str, Any]) -> str:
@@ -429,7 +460,7 @@ def checks_digest(root: Path) -> str:
     Each file contributes its path relative to ``root`` and the digest of its
     bytes, in order of path; caches (``__pycache__``, ``*.pyc``) are skipped.
     """
-    files = [root / _TOML] + [
+    files = [root / _TOML] * (root / _TOML).is_file() + [
         p for p in (root / "checks").rglob("*")
         if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"
     ]

@@ -492,6 +492,27 @@ def submitted_notebooks(assignment: Assignment, path: Path) -> dict[str, Path]:
     return found
 
 
+def group_submissions(assignment: Assignment, paths: Sequence[Path]) -> list[Path]:
+    """The submissions among notebook files found for ``assignment``: files or folders.
+
+    In nbgrader's layout (``submitted/<student>/<assignment>/``) only the folders
+    of this assignment are kept. For an assignment of several notebooks, a folder
+    holding any of them is one submission (the student's other notebooks in it
+    are not graded); a file elsewhere stays a submission of the first notebook.
+    """
+    names = {nb.name for nb in assignment.notebooks}
+    found: list[Path] = []
+    for path in paths:
+        parts = Path(path).parts
+        if len(parts) >= 4 and parts[-4] == "submitted" and parts[-2] != assignment.name:
+            continue  # another assignment of the nbgrader course
+        if len(names) > 1 and any(os.path.lexists(Path(path).parent / n) for n in names):
+            found.append(Path(path).parent)
+        else:
+            found.append(Path(path))
+    return list(dict.fromkeys(found))
+
+
 def _submission_sha256(path: Path) -> str:
     """The file's SHA-256, or over a folder's files (relative path and contents)."""
     if not path.is_dir() or path.is_symlink():
@@ -527,9 +548,17 @@ def _combined(assignment: str, named: list[tuple[str, SubmissionResult]],
     stdout = "".join(f"--- {name} ---\n{p.stdout}" for name, p in named if p.stdout)
     return replace(_result(assignment, outcome, output,
                            tuple(t for p in parts for t in p.tests), seed),
-                   stdout=stdout, notes=tuple(f"{name}: {n}" for name, p in named for n in p.notes),
+                   stdout=stdout, notes=_merged_notes(named),
                    cell_errors=tuple(e for p in parts for e in p.cell_errors),
                    cpu_seconds=round(sum(p.cpu_seconds for p in parts), 3))
+
+
+def _merged_notes(named: list[tuple[str, SubmissionResult]]) -> tuple[str, ...]:
+    """The notes of every notebook: one copy of those all share, the others named."""
+    shared = set.intersection(*(set(p.notes) for _, p in named))
+    notes = [n for n in named[0][1].notes if n in shared]
+    notes += [f"{name}: {n}" for name, p in named for n in p.notes if n not in shared]
+    return tuple(dict.fromkeys(notes))
 
 
 def _result(assignment: str, outcome: Any, output: str, tests: tuple[CheckResult, ...],
@@ -573,7 +602,7 @@ def _file_sha256(path: Path) -> str:
 
 
 __all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
-           "forget_check_modules", "submission_key", "submission_seed", "summarise_run"]
+           "forget_check_modules", "group_submissions", "submitted_notebooks", "submission_key", "submission_seed", "summarise_run"]
 
 
 def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseException | str) -> SubmissionResult:
@@ -590,4 +619,4 @@ def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseExcep
 
 def client_key(path: Path, assignment: Assignment, options: GradingOptions) -> str:
     """The key a result of ``path`` must carry to be reused (computed where the file is)."""
-    return submission_key(_file_sha256(path), assignment, options)
+    return submission_key(_submission_sha256(Path(path)), assignment, options)

@@ -15,7 +15,9 @@ What a student sees:
   pictures: a picture of an unseen dataset would show the dataset; when a
   hidden check made one, the page says that it is not shown);
 * the cells that raised, with their tracebacks, and the notebook's printed
-  output, both cut to a readable length.
+  output, both cut to a readable length;
+* for an assignment of several notebooks, one section per notebook (its
+  checks and cell errors, its points), and the points waiting for a person.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from pathlib import Path
 import jinja2
 
 from autograder.results.files import atomic_write_text
-from autograder.results.model import Attachment, CheckResult, SubmissionResult
+from autograder.results.model import Attachment, CellError, CheckResult, SubmissionResult
 
 FEEDBACK_NAME = "feedback.html"
 #: printed output shown on the page (the head is kept: it is what the notebook printed first)
@@ -156,24 +158,52 @@ def _hidden_view(check: CheckResult) -> dict[str, object]:
             "pictures_withheld": len(check.attachments)}
 
 
+def _section(folder: Path, name: str | None, checks: list[CheckResult],
+             errors: list[CellError]) -> dict[str, object]:
+    """One notebook's part of the page (the whole page when an assignment has one)."""
+    public = [c for c in checks if not c.hidden]
+    hidden = [c for c in checks if c.hidden]
+    return {"name": name, "points": _points(checks),
+            "public": [_public_view(folder, c) for c in public], "public_points": _points(public),
+            "hidden": [_hidden_view(c) for c in hidden], "hidden_points": _points(hidden),
+            "cell_errors": [_error_view(e) for e in errors]}
+
+
+def _error_view(e: CellError) -> dict[str, object]:
+    return {"cell": e.cell + 1, "ename": clean_text(e.ename),
+            "evalue": clip(clean_text(e.evalue), max_lines=5, max_chars=500),
+            "traceback": clip(clean_text(e.traceback), max_lines=MAX_TRACEBACK_LINES,
+                              max_chars=MAX_OUTPUT_CHARS, tail_lines=40)}
+
+
+def sections(folder: Path, result: SubmissionResult) -> list[dict[str, object]]:
+    """The page's sections: one per notebook of a several-notebook assignment, else one."""
+    names = list(dict.fromkeys([c.notebook for c in result.tests if c.notebook]
+                               + [e.notebook for e in result.cell_errors if e.notebook]))
+    if not names:
+        return [_section(folder, None, list(result.tests), list(result.cell_errors))]
+    loose = [c for c in result.tests if not c.notebook]  # none today; never dropped
+    found = [_section(folder, n, [c for c in result.tests if c.notebook == n],
+                      [e for e in result.cell_errors if e.notebook == n]) for n in names]
+    return found + ([_section(folder, "other checks", loose, [])] if loose else [])
+
+
 def feedback_context(folder: Path, result: SubmissionResult, *, title: str | None = None
                      ) -> dict[str, object]:
     """Everything the template shows, computed from ``result`` (pictures read from ``folder``)."""
     public = [c for c in result.tests if not c.hidden]
     hidden = [c for c in result.tests if c.hidden]
     percent = 100 * result.score / result.max_score if result.max_score else 0.0
+    waiting = sum(c.max_score for c in result.tests if c.kind == "needs-person")
     return {
+        "sections": sections(folder, result), "person_points": f"{waiting:g}" if waiting else "",
         "title": title or result.assignment, "id": result.id, "outcome": result.outcome,
         "score": f"{result.score:g}", "max_score": f"{result.max_score:g}",
         "percent": f"{percent:.0f}", "summary": clean_text(result.output),
         "public": [_public_view(folder, c) for c in public],
         "public_points": _points(public),
         "hidden": [_hidden_view(c) for c in hidden], "hidden_points": _points(hidden),
-        "cell_errors": [{"cell": e.cell + 1, "ename": clean_text(e.ename),
-                         "evalue": clip(clean_text(e.evalue), max_lines=5, max_chars=500),
-                         "traceback": clip(clean_text(e.traceback), max_lines=MAX_TRACEBACK_LINES,
-                                           max_chars=MAX_OUTPUT_CHARS, tail_lines=40)}
-                        for e in result.cell_errors],
+        "cell_errors": [_error_view(e) for e in result.cell_errors],
         "stdout": clip(clean_text(result.stdout), max_lines=MAX_OUTPUT_LINES,
                        max_chars=MAX_OUTPUT_CHARS),
         "engine": result.engine, "sha256": result.sha256[:12], "seed": result.seed,

@@ -21,7 +21,7 @@ from typing import Callable, Iterable, Sequence
 from tqdm import tqdm
 
 from autograder.engine.assignment import Assignment
-from autograder.engine.grader import GradingOptions, client_key, error_result
+from autograder.engine.grader import GradingOptions, client_key, error_result, group_submissions
 from autograder.engine.slot import GradingSlot
 from autograder.errors import UsageError
 from autograder.results.model import SubmissionResult
@@ -128,6 +128,8 @@ def place_name(path: Path) -> str:
     parts = path.parts
     if len(parts) >= 4 and parts[-4] == "submitted":
         return parts[-3]
+    if len(parts) >= 3 and parts[-3] == "submitted" and path.is_dir():  # a folder of notebooks
+        return parts[-2]
     return path.stem
 
 
@@ -228,7 +230,7 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
         raise UsageError("--jobs sets the local pool's size; with --dask the cluster's grading "
                          "slots set how many run at once (local:N, or `autograder worker --slots N`).")
     options = options or GradingOptions()
-    paths = collect_submissions(submissions)
+    paths = group_submissions(assignment, collect_submissions(submissions))
     ids = assign_ids(paths)
     if shard is not None:
         paths = [p for p in paths if shard.holds(ids[p])]
