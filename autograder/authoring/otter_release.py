@@ -32,13 +32,11 @@ import nbformat
 
 from autograder.engine.assignment import Assignment
 from autograder.engine.otter_format import (
-    OtterNotebook, OtterQuestion, case_points, doctest_text, read_otter)
+    BOUNDARY, CONFIG, OtterNotebook, OtterQuestion, case_points, doctest_text, read_otter)
 from autograder.errors import AssignmentError
 
 __all__ = ["otter_template", "strip_solutions", "verify_no_hidden_tests"]
 
-_BOUNDARY = re.compile(r"#\s+(BEGIN|END)\s+(QUESTION|PROMPT|SOLUTION|TESTS)\s*", re.IGNORECASE)
-_CONFIG = re.compile(r"#\s+ASSIGNMENT\s+CONFIG", re.IGNORECASE)
 # otter's solution_assignment_regex, solution_line_regex and begin_solution_regex
 _ASSIGNMENT = re.compile(r"(\s*(?:[\w.]+(?=[^\w.])(?:\[['\"]?.*['\"]?\])*(?:,\s*)?)+\s*=).* ?# ?SOLUTION")
 _LINE = re.compile(r"(\s*).* ?# ?SOLUTION")
@@ -116,9 +114,9 @@ def otter_template(assignment: Assignment) -> nbformat.NotebookNode:
     block, question = None, None
     for number, cell in enumerate(master.cells, start=1):
         first = (str(cell.source).splitlines() or [""])[0]
-        if cell.cell_type == "raw" and _CONFIG.match(first):
+        if cell.cell_type == "raw" and CONFIG.match(first):
             continue
-        boundary = _BOUNDARY.match(first) if cell.cell_type == "raw" else None
+        boundary = BOUNDARY.match(first) if cell.cell_type == "raw" else None
         if boundary:
             edge, kind = boundary.group(1).lower(), boundary.group(2).lower()
             if kind == "question":

@@ -44,10 +44,11 @@ from autograder.errors import AssignmentError, UsageError
 
 __all__ = ["OtterCase", "OtterQuestion", "OtterNotebook", "is_otter_notebook", "read_otter",
            "case_points", "otter_cell_tests", "checker_tests", "read_requirements_file",
-           "doctest_text", "runnable_source", "otter_parts"]
+           "doctest_text", "runnable_source", "otter_parts", "CONFIG", "BOUNDARY"]
 
-_CONFIG = re.compile(r"#\s+ASSIGNMENT\s+CONFIG", re.IGNORECASE)
-_BOUNDARY = re.compile(r"#\s+(BEGIN|END)\s+(QUESTION|PROMPT|SOLUTION|TESTS)\s*", re.IGNORECASE)
+#: the first line of otter's config cell, and of its block boundaries (``# BEGIN TESTS``)
+CONFIG = re.compile(r"#\s+ASSIGNMENT\s+CONFIG", re.IGNORECASE)
+BOUNDARY = re.compile(r"#\s+(BEGIN|END)\s+(QUESTION|PROMPT|SOLUTION|TESTS)\s*", re.IGNORECASE)
 # otter's BEGIN_TEST_CONFIG_REGEX / END_TEST_CONFIG_REGEX (assign/tests_manager.py)
 _BEGIN_TEST_CONFIG = re.compile(r'(?:.\s*=\s*)?""?"?\s*#\s*BEGIN\s*TEST\s*CONFIG', re.IGNORECASE)
 _END_TEST_CONFIG = re.compile(r'""?"?\s*#\s*END\s*TEST\s*CONFIG', re.IGNORECASE)
@@ -129,7 +130,7 @@ def _unfenced(cell: Any) -> Any:
 def _is_marker(cell: Any) -> bool:
     cell = _unfenced(cell)
     line = _first_line(cell)
-    return cell.get("cell_type") == "raw" and bool(_CONFIG.match(line) or _BOUNDARY.match(line))
+    return cell.get("cell_type") == "raw" and bool(CONFIG.match(line) or BOUNDARY.match(line))
 
 
 def is_otter_notebook(path: Path) -> bool:
@@ -180,12 +181,12 @@ class _Parser:
 
     def feed(self, number: int, cell: Any) -> None:
         line = _first_line(cell)
-        if cell.get("cell_type") == "raw" and _CONFIG.match(line):
+        if cell.get("cell_type") == "raw" and CONFIG.match(line):
             if self.has_config:
                 raise self.error(number, "a second '# ASSIGNMENT CONFIG' cell; keep one.")
             self.config, self.has_config = self.yaml(number, cell, "the ASSIGNMENT CONFIG"), True
             return
-        boundary = _BOUNDARY.match(line) if cell.get("cell_type") == "raw" else None
+        boundary = BOUNDARY.match(line) if cell.get("cell_type") == "raw" else None
         if boundary:
             self.boundary(number, boundary.group(1).lower(), boundary.group(2).lower(), cell)
         elif self.block == "tests":
