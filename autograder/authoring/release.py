@@ -29,7 +29,9 @@ from typing import Any
 
 import nbformat
 
+from autograder.authoring.otter_release import otter_template, verify_no_hidden_tests
 from autograder.engine.assignment import Assignment
+from autograder.engine.otter_format import is_otter_notebook
 from autograder.errors import AssignmentError, UsageError
 
 __all__ = ["release", "student_template", "PREPROCESSORS", "FORBIDDEN_MARKERS"]
@@ -82,6 +84,8 @@ def student_template(assignment: Assignment, notebook: Path | None = None
         The instructor notebook cannot be read, or nbgrader rejects it (for
         example a solution region outside a solution cell).
     """
+    if is_otter_notebook(assignment.notebook):  # otter's assign format, not nbgrader's
+        return otter_template(assignment)
     # nbgrader is imported here: it is slow to import and only releasing needs it.
     try:
         from nbgrader import preprocessors
@@ -269,6 +273,8 @@ def _verify_release(assignment: Assignment, out_dir: Path, notebook: Path) -> No
         if marker in text:
             raise _leak(assignment, str(notebook), f"it contains {marker!r}")
     _verify_template(assignment, nbformat.reads(text, as_version=4), where=str(notebook))
+    if is_otter_notebook(assignment.notebook):
+        verify_no_hidden_tests(assignment, out_dir)
     secret = {_sha256(p): p for p in _hidden_files(assignment) if p.read_bytes().strip()}
     for path in out_dir.rglob("*"):
         if path.is_file() and _sha256(path) in secret:

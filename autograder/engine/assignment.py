@@ -53,6 +53,7 @@ import autograder
 from autograder.engine.celltests import CellTest, ManualCell
 from autograder.engine.forbidden import Rules
 from autograder.engine.nbgrader_source import course_source_dir, is_nbgrader_folder, nbgrader_parts
+from autograder.engine.otter_format import otter_parts
 from autograder.errors import AssignmentError
 
 __all__ = [
@@ -69,7 +70,7 @@ SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
                   "file_size_bytes", "output_bytes")
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
 _ALLOWED = {
-    "assignment": ("name", "title", "notebook", "data", "format"),
+    "assignment": ("name", "title", "notebook", "data", "format", "requirements"),
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
 }
@@ -340,17 +341,23 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
     notebook = _notebook(root, toml_path, named or default)
     data = _data_files(root, toml_path, _string_list(toml_path, config, "assignment", "data"))
     public, hidden = _checks(root, "public"), _checks(root, "hidden")
-    if not public and not hidden and (parts is None or not (parts.cell_tests or parts.manual_cells)):
+    otter = otter_parts(root, notebook) if parts is None else None  # otter's master notebook
+    requirements = (_string_list(toml_path, config, "assignment", "requirements")
+                    + (otter[1] if otter is not None else ()))
+    cells = bool(otter and otter[0]) or bool(parts and (parts.cell_tests or parts.manual_cells))
+    if not public and not hidden and not cells:
         raise AssignmentError(
             f"{root} has no checks: add test_*.py files under checks/public/ (released to "
             "students) or checks/hidden/ (kept back)"
             + (", or autograder test cells with points to the notebooks." if parts else "."))
     timeouts, limits = _limits(toml_path, config)
-    extra: dict[str, Any] = {}
+    extra: dict[str, Any] = {"requirements": requirements}
+    if otter is not None:
+        extra["cell_tests"] = otter[0]
     if parts is not None:
-        extra = {"notebooks": parts.notebooks, "cell_tests": parts.cell_tests,
-                 "manual_cells": parts.manual_cells,
-                 "data_files": tuple(sorted(set(data) | set(parts.extra_files)))}
+        extra.update({"notebooks": parts.notebooks, "cell_tests": parts.cell_tests,
+                      "manual_cells": parts.manual_cells,
+                      "data_files": tuple(sorted(set(data) | set(parts.extra_files)))})
     return Assignment(**{
         "name": name, "title": title, "root": root, "notebook": notebook, "data_files": data,
         "public_checks": public, "hidden_checks": hidden, "rules": _rules(toml_path, config),

@@ -40,6 +40,8 @@ from autograder.engine.identify import identify
 from autograder.engine.notebook import Notebook, locked_cells, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
+from autograder.engine.otter_format import checker_tests, is_otter_notebook, read_otter
+from autograder.engine.requirements import check_requirements
 from autograder.engine.student_process import NotebookRun, StudentProcess
 from autograder.engine.submission import (
     Submission,
@@ -200,6 +202,10 @@ class Grader:
         #: the submission being graded (its folder is hidden from the worker)
         self._source: Path | None = None
         self._checks_digest = ""
+        self._requirements_ok = False
+        #: public tests for grader.check, when the notebook is otter's (never the hidden ones)
+        self._otter = (checker_tests(read_otter(assignment.notebook))
+                       if is_otter_notebook(assignment.notebook) else None)
         self._slot = started_slot if started_slot is not None else GradingSlot(slot=slot, scratch=scratch)
 
     def __enter__(self) -> "Grader":
@@ -226,6 +232,31 @@ class Grader:
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass
+
+    def check_requirements(self) -> None:
+        """Raise :class:`AssignmentError` unless every requirement imports in the worker.
+
+        Runs once per grader, before its first submission: a ``import`` of each
+        required package's modules, in a sandboxed worker like a submission's (see
+        :mod:`autograder.engine.requirements`).
+        """
+        if self.assignment.requirements and not self._requirements_ok:
+            check_requirements(self.assignment.requirements, self._run_probe,
+                               where=f"The assignment {self.assignment.name!r}")
+            self._requirements_ok = True
+
+    def _run_probe(self, cells: list[tuple[int, str]]) -> list[tuple[bool, str]]:
+        session = StudentProcess(
+            slot=self._slot, cells=cells, data_files=(), policy=self.policy,
+            notebook_timeout=self.assignment.notebook_timeout, exclude=self._excluded_paths(),
+            forbid=self.assignment.rules.to_wire())
+        try:
+            run = session.start()
+        finally:
+            session.close()
+        ran = {c.index: c for c in run.cells}
+        return [(ran[i].ok, f"{ran[i].ename}: {ran[i].evalue}") if i in ran
+                else (False, "the worker stopped before it ran") for i, _ in cells]
 
     def close(self) -> None:
         try:
@@ -384,7 +415,7 @@ class Grader:
         return StudentProcess(
             slot=self._slot, cells=list(cells), data_files=self._data_files(), policy=policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
-            cpu_budget=budget, forbid=self.assignment.rules.to_wire())
+            cpu_budget=budget, forbid=self.assignment.rules.to_wire(), otter=self._otter)
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
                     seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:

@@ -136,6 +136,9 @@ class StudentProcess:
     #: the assignment's forbidden libraries, enforced in the worker at run time:
     #: ``{"names": [...], "internal_use": [...], "reason": "..."}``
     forbid: dict[str, Any] = field(default_factory=dict)
+    #: an otter assignment's public tests, for ``grader.check`` in the worker
+    #: (:mod:`autograder.worker.otter_stub`); None for other assignments
+    otter: dict[str, Any] | None = None
     restarts: int = 0
     skip: dict[int, str] = field(default_factory=dict)
     #: per function: how often a call crashed the worker, and the last such error
@@ -251,6 +254,8 @@ class StudentProcess:
             # protocol's item limit (the worker parses it with json.loads).
             "cells_json": json.dumps([[i, s] for i, s in self.cells if i not in self.skip]),
         }
+        if self.otter is not None:
+            request["otter"] = self.otter
         if os.listdir(self.slot.work_root) == [self._workdir.name]:
             # The warm parent's one ruleset may then serve this child: it lets the child
             # change files anywhere in the work root, which holds nothing but its own

@@ -85,6 +85,7 @@ class LocalBackend:
         queue = _Queue(jobs)
         with Grader(assignment, options, started_slot=self.started_slot) as grader:
             grader.prepare()
+            grader.check_requirements()  # before any result: a missing package stops the run
             if slots == 1:
                 while (job := queue.take()) is not None:
                     finished(grade_one(grader, job.path, job.id, out_dir))

@@ -73,6 +73,7 @@ from autograder.worker import figures  # noqa: E402
 from autograder.worker import guard  # noqa: E402
 from autograder.worker import hugepages  # noqa: E402
 from autograder.worker import loop  # noqa: E402
+from autograder.worker import otter_stub  # noqa: E402
 
 def _adopt_orphans() -> None:
     """Become the child subreaper: whatever a submission leaves behind stays below us.
@@ -126,6 +127,7 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
             return
         if _forbid_key(request) != _APPLIED[0]:  # the warm parent applied another list
             notes = (*notes, *_apply_forbid(request))
+        otter_stub.install(request.get("otter"))  # an otter assignment's grader.check
         output = execute.capture_output(policy.limits.output_bytes)
         frames.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
