@@ -20,18 +20,21 @@ test (source, printed output, error) reaches the student's feedback.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 from autograder.results.model import CheckResult
 
 __all__ = ["CellTest", "CellReport", "ManualCell", "manual_result", "PlacedTests", "place_cell_tests", "score_cell_tests",
-           "PARTIAL_CREDIT", "STDERR_WRITTEN"]
+           "PARTIAL_CREDIT", "STDERR_WRITTEN", "WITHHELD", "withhold_after_hidden"]
 
 #: ``ename`` the wrapper raises to report a number as the cell's result (partial credit)
 PARTIAL_CREDIT = "NumgradePartialCredit"
 #: ``ename`` the wrapper raises when a test cell wrote to stderr (nbgrader: no credit)
 STDERR_WRITTEN = "NumgradeStderrWritten"
+#: the one note said for everything held back by :func:`withhold_after_hidden`
+WITHHELD = ("The output of cells run after a hidden test is not shown (printed text, "
+            "displays, error messages): code that ran before could have read the hidden test.")
 
 
 @dataclass(frozen=True)
@@ -160,6 +163,12 @@ class PlacedTests:
     def test_indices(self) -> frozenset[int]:
         return frozenset(index for index, _ in self.tests)
 
+    @property
+    def hidden_sources(self) -> dict[int, str]:
+        """The cells of the hidden tests, by index: the worker gets each only on reaching it."""
+        hidden = {index for index, test in self.tests if test.hidden}
+        return {index: source for index, source in self.cells if index in hidden}
+
 
 def place_cell_tests(cells: Sequence[tuple[int, str, str | None]],
                      tests: Sequence[CellTest], *, end: int) -> PlacedTests:
@@ -260,3 +269,21 @@ def _verdict(report: CellReport, test: CellTest) -> tuple[float, str, str]:
     if report.traceback:
         message += "\n\n" + report.traceback
     return 0.0, "exception", message
+
+
+def withhold_after_hidden(placed: PlacedTests, results: Sequence[CheckResult],
+                          hidden_from: int | None) -> tuple[CheckResult, ...]:
+    """``results`` (from :func:`score_cell_tests`, same order) with the error text of the
+    visible tests that ran from the cell ``hidden_from`` on replaced by :data:`WITHHELD`.
+
+    Student code may have read a hidden test by then and can write what it read into
+    a later test's error. Scores stay; hidden tests already say only passed/failed.
+    """
+    if hidden_from is None:
+        return tuple(results)
+    kept = []
+    for (index, test), result in zip(placed.tests, results):
+        if index >= hidden_from and not test.hidden and result.kind == "exception":
+            result = replace(result, output=WITHHELD)
+        kept.append(result)
+    return tuple(kept)

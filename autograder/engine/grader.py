@@ -32,9 +32,12 @@ from autograder.engine.forbidden import (
 from autograder.engine.celltests import (
     CellReport,
     CellTest,
+    PlacedTests,
+    WITHHELD,
     manual_result,
     place_cell_tests,
     score_cell_tests,
+    withhold_after_hidden,
 )
 from autograder.engine.identify import identify
 from autograder.engine.notebook import Notebook, locked_cells, read_notebook, restore_locked
@@ -370,7 +373,7 @@ class Grader:
         forbidden = forbidden_functions(self.assignment.rules, sources, numbers, report)
         placed = place_cell_tests([(c.index, c.source, c.grade_id) for c in notebook.cells],
                                   self._cell_tests(name), end=notebook.end)
-        session = self._session(placed.cells, out_dir)
+        session = self._session(placed, out_dir)
         runs_checks = runs_checks and bool(self.check_files)
         # The checks are collected while a warm worker that is not running yet (the
         # first submission, or after a crash) starts and imports its libraries.
@@ -389,20 +392,24 @@ class Grader:
         cell_tests = score_cell_tests(
             placed, [CellReport(c.index, c.ok, c.ename, c.evalue, c.traceback) for c in run.cells],
             timed_out=run.timed_out_cells, crashed=run.crashed_cells)
+        cell_tests = withhold_after_hidden(placed, cell_tests, run.hidden_from)
+        if run.hidden_from is not None:
+            tests = withhold_check_output(tests, out_dir)
         # what the student's own cells did: the test cells are reported as checks above
-        run = without_cells(run, placed.test_indices)
+        run = withhold_cell_errors(without_cells(run, placed.test_indices))
         outcome = ("timeout" if run.timed_out_cells else
                    "crashed" if run.crashed or run.crashed_cells else "graded")
         result = _result(self.assignment.name, outcome, summarise_run(run, notebook),
                          cell_tests + tests + self._manual(name), seed)
         return replace(result, stdout=run.stdout,
                        notes=(tuple(run.notes) + tuple(notebook.warnings) + placed.notes
-                              + review_notes(report, numbers)),
+                              + review_notes(report, numbers)
+                              + ((WITHHELD,) if run.hidden_from is not None else ())),
                        cpu_seconds=round(session.cpu_seconds, 3),
                        cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
                                          for c in run.cells if not c.ok))
 
-    def _session(self, cells: Sequence[tuple[int, str]], out_dir: Path | None) -> StudentProcess:
+    def _session(self, placed: PlacedTests, out_dir: Path | None) -> StudentProcess:
         """A fresh sandboxed process for one notebook's cells."""
         notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
         call_timeout = self.options.call_timeout or self.assignment.call_timeout
@@ -413,7 +420,8 @@ class Grader:
         policy = replace(self.policy, limits=replace(
             limits, cpu_seconds=max(limits.cpu_seconds, int(budget) + 5)))
         return StudentProcess(
-            slot=self._slot, cells=list(cells), data_files=self._data_files(), policy=policy,
+            slot=self._slot, cells=list(placed.cells), hidden_sources=placed.hidden_sources,
+            data_files=self._data_files(), policy=policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
             cpu_budget=budget, forbid=self.assignment.rules.to_wire(), otter=self._otter)
 
@@ -504,6 +512,32 @@ def without_cells(run: NotebookRun, indices: frozenset[int]) -> NotebookRun:
     return replace(run, cells=tuple(c for c in run.cells if c.index not in indices),
                    timed_out_cells=tuple(i for i in run.timed_out_cells if i not in indices),
                    crashed_cells=tuple(i for i in run.crashed_cells if i not in indices))
+
+
+def withhold_check_output(tests: Sequence[CheckResult],
+                          out_dir: Path | None) -> tuple[CheckResult, ...]:
+    """The checks' results with their error text and pictures held back: they called the
+    student's functions in a process a hidden test had entered, so a message or a
+    figure could carry what the student's code read of it. Scores stay."""
+    kept = []
+    for test in tests:
+        for picture in test.attachments:
+            if out_dir is not None:
+                (out_dir / picture.filename).unlink(missing_ok=True)
+        output = WITHHELD if test.kind != "ok" and not test.hidden else test.output
+        kept.append(replace(test, output=output, attachments=()))
+    return tuple(kept)
+
+
+def withhold_cell_errors(run: NotebookRun) -> NotebookRun:
+    """``run`` with the errors of the cells from ``run.hidden_from`` on cut to "an error":
+    their message could hold what the student's code read of a hidden test."""
+    if run.hidden_from is None:
+        return run
+    after = run.hidden_from
+    return replace(run, cells=tuple(
+        replace(c, ename="Error", evalue="not shown (see the notes)", traceback="")
+        if c.index >= after and not c.ok else c for c in run.cells))
 
 
 def _in_section(part: SubmissionResult, section: str | None) -> SubmissionResult:

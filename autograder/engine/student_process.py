@@ -100,6 +100,11 @@ class NotebookRun:
     crashed: bool = False
     notes: tuple[str, ...] = ()
     cpu_seconds: float = 0.0
+    #: the index of the first hidden test cell whose source the worker was given: the
+    #: cells from it on ran where student code could have read a hidden test, so their
+    #: output is not in ``stdout`` and their reports are for scoring only (None: no
+    #: hidden test ran)
+    hidden_from: int | None = None
 
 
 #: the most characters of captured output the grader keeps from the worker
@@ -139,6 +144,9 @@ class StudentProcess:
     #: an otter assignment's public tests, for ``grader.check`` in the worker
     #: (:mod:`autograder.worker.otter_stub`); None for other assignments
     otter: dict[str, Any] | None = None
+    #: sources of the hidden test cells, by index: left out of the start request and
+    #: sent only when the worker reaches the cell (see :meth:`_give_source`)
+    hidden_sources: dict[int, str] = field(default_factory=dict)
     restarts: int = 0
     skip: dict[int, str] = field(default_factory=dict)
     #: per function: how often a call crashed the worker, and the last such error
@@ -157,6 +165,10 @@ class StudentProcess:
     _workdir: Path | None = None
     _clock: CpuClock | None = None
     _started_at: float | None = None
+    #: this run's hidden test cells not yet given to the worker, in running order
+    _pending: list[int] = field(default_factory=list)
+    #: set when the first hidden test is given: (its index, the reports and output before it)
+    _before: tuple[int, list[CellRun], str] | None = None
     report: NotebookRun | None = None
 
     # -- lifecycle -------------------------------------------------------
@@ -172,19 +184,28 @@ class StudentProcess:
             if status == "ready":
                 cells, stdout, functions = payload
                 break
-            if cell is None or len(self.skip) >= MAX_RESTARTS + 1:
+            # A cell skipped already cannot stop a run unless the student's code named it
+            # (a forged "cell" frame): giving up then keeps the restarts finite.
+            if cell is None or cell in self.skip or len(self.skip) >= MAX_RESTARTS + 1:
                 self._kill()
                 self._pid = None
                 if cell is not None:
                     self.skip[cell] = status
                 break
             self.skip[cell] = status
+        hidden_from = None
+        if self._before is not None and self._pid is not None:
+            # Only what the worker said before a hidden test reached it is shown.
+            hidden_from, earlier, stdout = self._before
+            cells = ([c for c in earlier if c.index < hidden_from]
+                     + [c for c in cells if c.index >= hidden_from])
         self.report = NotebookRun(
             cells=tuple(cells), stdout=stdout,
             functions=tuple(functions), seconds=time.perf_counter() - begin,
             timed_out_cells=tuple(sorted(i for i, s in self.skip.items() if s == "timeout")),
             crashed_cells=tuple(sorted(i for i, s in self.skip.items() if s == "crash")),
-            crashed=self._pid is None, notes=tuple(notes), cpu_seconds=self.cpu_seconds)
+            crashed=self._pid is None, notes=tuple(notes), cpu_seconds=self.cpu_seconds,
+            hidden_from=hidden_from)
         return self.report
 
     def _run_once(self, notes: list[str]) -> tuple[str, int | None, Any]:
@@ -228,16 +249,48 @@ class StudentProcess:
                         notes[:] = [str(n)[:500] for n in message.get("notes", [])][:64]
                     elif op == "cell":
                         current = int(message["index"])
+                    elif op == "need-source" and not self._give_source(message, current,
+                                                                        wall_deadline):
+                        self._kill()  # not the worker's request: the student's code speaking
+                        return "crash", current, None
                     elif op == "ready":
                         reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
                         return "ready", None, (reports,
                                                str(message.get("stdout", ""))[:OUTPUT_CAP],
                                                [str(f)[:200] for f in message.get("functions", [])])
-                except (KeyError, TypeError, ValueError):
+                except (KeyError, TypeError, ValueError, OSError, ProtocolError):
                     self._kill()
                     return "crash", current, None
         finally:
             self.cpu_seconds += spent if spent is not None else self._clock.own()
+
+    def _give_source(self, message: dict[str, Any], current: int | None,
+                     wall_deadline: float) -> bool:
+        """Send the source of the hidden test cell the worker has reached; False if the
+        request breaks the protocol (then it came from the student's code).
+
+        Answered only for the next hidden test cell of this run, in running order and
+        once each, and only for the cell the worker announced. The first answer also
+        fixes what the feedback may show: the reports and output that came with the
+        request, from before any hidden test was in the process.
+        """
+        index = int(message["index"])
+        if not self._pending or index != self._pending[0] or index != current:
+            return False
+        if self._before is None:
+            reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
+            self._before = (index, reports, str(message["stdout"])[:OUTPUT_CAP])
+        self._pending.pop(0)
+        assert self._sock is not None
+        # Bounded: a child that stopped reading must not hold the grader past its backstop.
+        previous = self._sock.gettimeout()
+        self._sock.settimeout(max(1.0, wall_deadline - time.monotonic()))
+        try:
+            frames.send_message(self._sock, {"op": "source", "index": index,
+                                             "source": self.hidden_sources[index]})
+        finally:
+            self._sock.settimeout(previous)
+        return True
 
     def _spawn(self) -> None:
         self._kill()
@@ -252,8 +305,12 @@ class StudentProcess:
             "exclude": [str(p) for p in self.exclude],
             # One string, not a list: a notebook of many tiny cells must not reach the
             # protocol's item limit (the worker parses it with json.loads).
-            "cells_json": json.dumps([[i, s] for i, s in self.cells if i not in self.skip]),
+            # A hidden test cell goes without its source (null): see _give_source.
+            "cells_json": json.dumps([[i, None if i in self.hidden_sources else s]
+                                      for i, s in self.cells if i not in self.skip]),
         }
+        self._pending = [i for i, _ in self.cells if i in self.hidden_sources and i not in self.skip]
+        self._before = None
         if self.otter is not None:
             request["otter"] = self.otter
         if os.listdir(self.slot.work_root) == [self._workdir.name]:

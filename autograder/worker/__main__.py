@@ -131,8 +131,9 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         output = execute.capture_output(policy.limits.output_bytes)
         frames.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
-        run.run([(int(i), str(s)) for i, s in json.loads(request["cells_json"])],
-                lambda i: _announce(sock, i))
+        run.run([(int(i), None if s is None else str(s))
+                 for i, s in json.loads(request["cells_json"])],
+                lambda i: _announce(sock, i), lambda i: _hidden_source(sock, i, run, output))
         frames.send_message(sock, {
             "op": "ready",
             "cells": [o.to_wire() for o in run.outcomes],
@@ -223,6 +224,24 @@ def _unreadable_path() -> tuple[str, str] | None:
 def _announce(sock: socket.socket, index: int) -> None:
     """Tell the grader which cell starts now (so a hang is pinned to its cell)."""
     frames.send_message(sock, {"op": "cell", "index": index})
+
+
+def _hidden_source(sock: socket.socket, index: int, run: execute.Execution,
+                   output: execute.BoundedText) -> str:
+    """Ask the grader for the source of the hidden test cell ``index``, reached now.
+
+    It was left out of the request, so code of the cells before could not read it.
+    The reports and output so far go with the question: the grader shows the
+    student nothing produced after a hidden test entered this process.
+    """
+    frames.send_message(sock, {"op": "need-source", "index": index,
+                               "cells": [o.to_wire() for o in run.outcomes],
+                               "stdout": output.take()})
+    answer = frames.recv_message(sock)
+    if not (isinstance(answer, dict) and answer.get("op") == "source"
+            and answer.get("index") == index and isinstance(answer.get("source"), str)):
+        raise ProtocolError(f"the grader did not send the source of cell {index}")
+    return answer["source"]
 
 
 def _quiet_standard_streams() -> None:

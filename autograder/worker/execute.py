@@ -140,9 +140,16 @@ class Execution:
     output: BoundedText
     outcomes: list[CellOutcome] = field(default_factory=list)
 
-    def run(self, cells: list[tuple[int, str]], before_cell: Callable[[int], None]) -> None:
+    def run(self, cells: list[tuple[int, str | None]], before_cell: Callable[[int], None],
+            fetch_source: Callable[[int], str] | None = None) -> None:
+        """Run ``cells``; a cell without source (a hidden test) gets it from ``fetch_source``
+        once it is reached."""
         for index, source in cells:
             before_cell(index)
+            if source is None:
+                if fetch_source is None:
+                    raise ValueError(f"cell {index} came without its source")
+                source = fetch_source(index)
             self.outcomes.append(self._run_one(index, source))
 
     def _run_one(self, index: int, source: str) -> CellOutcome:
