@@ -31,7 +31,7 @@ from autograder.engine.forbidden import (
 from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
-from autograder.engine.student_process import NotebookRun, StudentProcess
+from autograder.engine.student_process import NotebookRun, StudentProcess, check_cell_count
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
 from autograder.results.store import write_submission
@@ -241,6 +241,7 @@ class Grader:
             _require_regular_file(Path(path))
             notebook: Notebook | None = restore_locked(
                 read_notebook(path, max_bytes=self.options.max_notebook_bytes), self._locked)
+            check_cell_count(len(notebook.cells))
             problem = ""
         except NotebookError as exc:
             notebook, problem = None, str(exc)
@@ -292,6 +293,7 @@ class Grader:
                                          digest)
             finally:
                 session.close()
+        run = session.report or run  # as it stands after the calls (a protocol violation)
         outcome = ("timeout" if run.timed_out_cells else
                    "crashed" if run.crashed or run.crashed_cells else "graded")
         result = _result(self.assignment.name, outcome, summarise_run(run, notebook), tests, seed)
@@ -374,6 +376,8 @@ def summarise_run(run: NotebookRun, notebook: Notebook) -> str:
     if errors:
         listed = "; ".join(f"cell {c.index + 1} ({c.ename}: {c.evalue[:120]})" for c in errors[:5])
         parts.append(f"{len(errors)} cell(s) raised an error: {listed}.")
+    if run.violation:
+        parts.append(f"{run.violation}.")
     if run.crashed:
         parts.append("The worker running your notebook stopped (it exited, or hit a memory "
                      "or CPU limit); checks that needed it were scored zero.")
