@@ -31,7 +31,12 @@ from autograder.engine.forbidden import (
 from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
-from autograder.engine.student_process import NotebookRun, StudentProcess, check_cell_count
+from autograder.engine.student_process import (
+    NotebookRun,
+    StudentProcess,
+    check_cell_count,
+    wall_limit,
+)
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
 from autograder.results.store import write_submission
@@ -267,9 +272,7 @@ class Grader:
         sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
         report = scan_sources(self.assignment.rules, sources)
         forbidden = forbidden_functions(self.assignment.rules, sources, numbers, report)
-        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
-        call_timeout = self.options.call_timeout or self.assignment.call_timeout
-        budget = self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+        notebook_timeout, budget = self._budgets()
         # RLIMIT_CPU is the kernel's last word on one process: never below the budget the
         # engine itself enforces, so an honest slow submission meets the engine's message.
         limits = self.policy.limits
@@ -302,6 +305,17 @@ class Grader:
                        cpu_seconds=round(session.cpu_seconds, 3),
                        cell_errors=tuple(CellError(c.index, c.ename, c.evalue, c.traceback)
                                          for c in run.cells if not c.ok))
+
+    def _budgets(self) -> tuple[float, float]:
+        """The notebook's CPU time limit and the whole submission's CPU budget, in seconds."""
+        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
+        call_timeout = self.options.call_timeout or self.assignment.call_timeout
+        return notebook_timeout, self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+
+    def wall_limit(self) -> float:
+        """The most wall-clock seconds the student's code of one submission can hold the grader
+        (see :func:`autograder.engine.student_process.wall_limit`)."""
+        return wall_limit(*self._budgets())
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
                     seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:

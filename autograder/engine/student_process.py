@@ -76,6 +76,17 @@ def wall_backstop(cpu_limit: float) -> float:
     return WALL_FACTOR * cpu_limit + WALL_SLACK
 
 
+def wall_limit(notebook_timeout: float, cpu_budget: float) -> float:
+    """The most wall-clock seconds one submission's worker can take, every backstop reached.
+
+    The notebook runs up to ``MAX_RESTARTS + 1`` times before the first call; calls
+    start until the submission's wall budget (``wall_backstop(cpu_budget)`` since the
+    start) is spent, and the last one may take as long again, a restart of the
+    notebook included. What the checks do on the trusted side comes on top.
+    """
+    return (MAX_RESTARTS + 2) * wall_backstop(notebook_timeout) + 2 * wall_backstop(cpu_budget)
+
+
 def payload_size(value: Any, _depth: int = 0) -> int:
     """How many numbers a call's arguments hold: the "input size" of a call."""
     if _depth > 32:
