@@ -22,6 +22,7 @@ from pathlib import Path
 import nbformat
 import pytest
 
+from tests.autograder.test_problems import user_env  # the ordinary user's venv (a fixture)
 from tests.files.make_problems import SOLUTION, nb
 from tests.support import envs
 
@@ -129,29 +130,10 @@ def write_batch(folder: Path) -> dict[str, str]:
     return {name: name for name in [*books, "h-many-cells"]}
 
 
-@pytest.fixture(scope="module")
-def user_env() -> object:
-    """Debian's Python in a venv of an ordinary user, numgrade installed from a copy."""
-    why = envs.can_switch_users()
-    if why is not None:
-        pytest.skip(f"the ordinary-user batch cannot run: {why}")
-    if not Path("/usr/bin/python3").exists():
-        pytest.skip("the ordinary-user batch needs Debian's /usr/bin/python3")
-    user = envs.ordinary_user()
-    top = envs.shared_tempdir("numgrade-channel-")
-    source = envs.copy_repository(top / "src")
-    envs.give_to(user, top)
-    install = [str(source)] + ([str(source / "reference")]
-                               if (source / "reference" / "pyproject.toml").exists() else [])
-    env = envs.make_venv(top / "venv", install=install, python="/usr/bin/python3", user=user)
-    yield env, source
-    shutil.rmtree(top, ignore_errors=True)
-
-
 @pytest.fixture(scope="module", params=IDENTITIES)
 def batch(request: pytest.FixtureRequest) -> dict[str, object]:
     identity = request.param
-    env_user, source = request.getfixturevalue("user_env") if identity == "user" else (None, ROOT)
+    env_user, source = request.getfixturevalue(user_env.__name__) if identity == "user" else (None, ROOT)
     top = envs.shared_tempdir(f"numgrade-channel-{identity}-")
     request.addfinalizer(lambda: shutil.rmtree(top, ignore_errors=True))
     books, out, tmp = top / "books", top / "results", top / "tmp"
