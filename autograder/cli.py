@@ -201,7 +201,8 @@ def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentPar
     ros.add_argument("roster", type=Path, help="CSV with columns id, name, email and optionally role")
     ros.add_argument("--database", default=None, metavar="URL", help="as for `autograder serve`")
     ros.add_argument("--tokens", type=Path, default=None, metavar="FILE",
-                     help="where to write the new access tokens (default: tokens.csv in the data folder)")
+                     help="the tokens CSV to add the new access tokens to, keeping the tokens already "
+                          "in it (default: tokens.csv in the data folder)")
 
     sub = commands.add_parser("submit", help="submit a notebook to a grading service and print the score")
     sub.add_argument("notebook", type=Path, help="your notebook")
@@ -264,8 +265,11 @@ def _grade(args: argparse.Namespace) -> int:
     print("Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())))
     if report.other_shards:
         print(f"Shard {args.shard}: {report.other_shards} submission(s) left to the other shards.")
-    print(f"Results: {args.out / 'grades.csv'} ({len(report.folder)} row(s), every result in the "
-          f"folder) and {args.out}/<id>/results.json")
+    print(f"Results: {args.out / 'grades.csv'} ({len(report.folder)} row(s), the submissions "
+          f"given) and {args.out}/<id>/results.json")
+    for sub_id, source in report.conflicts:
+        print(f"conflict: {source} was not graded: {args.out / sub_id} holds another file's "
+              "result (see the summary)", file=sys.stderr)
     print(f"Feedback: {args.out}/<id>/feedback.html; class summary: {args.out / 'summary.html'}")
     if args.junit is not None:
         print(f"JUnit XML: {args.junit}")
@@ -347,11 +351,22 @@ def _roster(args: argparse.Namespace) -> int:
     from autograder.service.server import import_roster, open_course
 
     course = open_course(args.course, database=args.database)
-    count, tokens = import_roster(course, args.roster, tokens_out=args.tokens)
-    print(f"Imported {count} people into {course.name}.")
-    print(f"New access tokens: {tokens} (send each person theirs; the database keeps only hashes)."
-          if tokens else "Everyone already had a token; none were made.")
+    done = import_roster(course, args.roster, tokens_out=args.tokens)
+    print(f"Imported {len(done.added) + len(done.already)} people into {course.name}.")
+    print(f"Added ({len(done.added)}): {_names(done.added)}.")
+    print(f"Already there, name, email and role updated, token kept ({len(done.already)}): "
+          f"{_names(done.already)}.")
+    print(f"New access tokens: {done.new_tokens}, added to {done.tokens} beside the "
+          f"{done.kept_tokens} already there (send each person theirs; the database keeps only "
+          "hashes)." if done.tokens else "Everyone already had a token; none were made.")
     return 0
+
+
+def _names(ids: tuple[str, ...], most: int = 30) -> str:
+    if not ids:
+        return "nobody"
+    shown = ", ".join(ids[:most])
+    return shown if len(ids) <= most else f"{shown} and {len(ids) - most} more"
 
 
 def _submit(args: argparse.Namespace) -> int:

@@ -492,9 +492,15 @@ def decode(
     decoder = _Decoder(buffers, max_depth=max_depth, max_items=max_items)
     try:
         value = decoder.decode(tree, 0)
+        decoder.check_all_used()
     except RecursionError:
         raise ProtocolError("value is nested too deeply to decode") from None
-    decoder.check_all_used()
+    finally:
+        # The handlers (bound methods) make the decoder a reference cycle: without this
+        # it would keep the frame's buffers (up to MAX_FRAME_BYTES) until the next garbage
+        # collection; a loop of large callbacks kept gigabytes so.
+        decoder.buffers.clear()
+        decoder.handlers.clear()
     return value
 
 

@@ -27,38 +27,78 @@ refused (and the call scores as an exception with a message saying so), the
 worker's CPU limit still applies, garbage arguments raise a ``TypeError`` in
 the student's own code, and a stub kept and called after its call returned
 raises a clear error in the worker.
+
+What is recorded is bounded whatever the student sends: every call is counted
+and its evaluation points taken from the argument bound to the function's first
+parameter, however it was spelled (``f(t)``, ``f(x=t)``, ``f(*[t])``), up to
+:data:`MAX_RECORDED_POINTS`; a call's arguments are kept whole only while they fit
+:data:`MAX_RECORD_BYTES` (and the function's :data:`MAX_RECORDED_BYTES`), otherwise
+as :class:`ArgumentSummary` (type, shape, dtype and the first few values). Any
+exception the function raises on the student's arguments, of any type, is the
+student's: it is raised in the student's code as a built-in exception with a
+bounded message, and noted for the instructor. Only a misused grader API
+(:class:`~autograder.errors.UsageError`) is the check's own error.
 """
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 
 from autograder.boundary import limits, values
-from autograder.errors import AutograderError, UsageError
+from autograder.errors import UsageError
 
-__all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "CallRecord", "Traced", "traced",
-           "CallbackRegistry", "limit_message"]
+__all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "MAX_RECORDED_BYTES", "ArgumentSummary",
+           "CallRecord", "Traced", "traced", "CallbackRegistry", "limit_message"]
 
 #: most callbacks answered during one student call (safe functions are not limited)
 MAX_CALLBACKS = 200_000
-#: most evaluation points a traced function keeps (calls are always counted)
+#: most evaluation points a traced function keeps (calls are always counted): 16 MB
 MAX_RECORDED_POINTS = 2_000_000
-#: most calls whose full arguments a traced function keeps
+#: most calls whose arguments (whole or summarised) a traced function keeps
 MAX_RECORDED_CALLS = 10_000
-#: exception types passed on to the student's code as themselves
+#: largest arguments of one call kept whole; larger ones are kept as summaries
+MAX_RECORD_BYTES = 64 * 2**10
+#: most bytes of whole arguments a traced function keeps over all its records
+MAX_RECORDED_BYTES = 4 * 2**20
+#: values of an array argument a summary keeps, and arguments summarised per call
+SUMMARY_VALUES = 8
+SUMMARY_ARGUMENTS = 8
+#: exceptions a traced function keeps in ``errors`` (each cut to 500 characters)
+MAX_KEPT_ERRORS = 100
+#: lines for the instructor's log (``grader.log``) per check
+MAX_NOTES = 20
+#: exception types passed on to the student's code as themselves (others as RuntimeError)
 _PASSED_ON = ("TypeError", "ValueError", "ZeroDivisionError", "OverflowError",
               "ArithmeticError", "FloatingPointError", "IndexError", "KeyError")
 
 
 @dataclass(frozen=True)
+class ArgumentSummary:
+    """An argument too large to keep whole: what it was, its size and its first values."""
+
+    type: str
+    shape: tuple[int, ...]
+    dtype: str = ""
+    #: the first :data:`SUMMARY_VALUES` values (arrays and strings; empty otherwise)
+    sample: tuple[Any, ...] = ()
+
+
+@dataclass(frozen=True)
 class CallRecord:
-    """One call of a traced function by student code: its plain-data arguments."""
+    """One call of a traced function by student code: its plain-data arguments.
+
+    ``complete`` is False when the arguments were too large to keep: then each of
+    the first :data:`SUMMARY_ARGUMENTS` positional and keyword arguments is an
+    :class:`ArgumentSummary` (or a number, kept as it is).
+    """
 
     args: tuple[Any, ...]
     kwargs: dict[str, Any]
+    complete: bool = True
 
 
 class Traced:
@@ -73,9 +113,11 @@ class Traced:
         How many times student code called it (each call may evaluate many points).
     records : list of CallRecord
         The arguments of the first :data:`MAX_RECORDED_CALLS` calls answered by
-        the grader (safe functions, evaluated in the worker, record points only).
+        the grader, whole while they fit the byte budgets, summarised beyond
+        (safe functions, evaluated in the worker, record points only).
     errors : list of str
-        Exceptions the function raised on the student's arguments (for the check author).
+        Exceptions the function raised on the student's arguments (for the check
+        author; the first :data:`MAX_KEPT_ERRORS`, each cut short).
     """
 
     def __init__(self, function: Callable[..., Any], *, name: str = "f",
@@ -85,13 +127,8 @@ class Traced:
         self.function = function
         self.name = str(name)
         self.safe = _safe_name(function) if safe else ""
-        self.calls = 0
-        self.records: list[CallRecord] = []
-        self.errors: list[str] = []
-        self._points: list[np.ndarray] = []
-        self._kept = 0
-        self._recorded = 0
-        self.truncated = False
+        self._first = _first_parameter(function)
+        self.reset()
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         return self.function(*args, **kwargs)
@@ -101,8 +138,9 @@ class Traced:
 
     @property
     def points(self) -> np.ndarray:
-        """Every point where student code evaluated the function (the first argument of
-        each call, flattened), in call order; at most :data:`MAX_RECORDED_POINTS`."""
+        """Every point where student code evaluated the function (the argument bound to
+        its first parameter in each call, flattened), in call order; at most
+        :data:`MAX_RECORDED_POINTS`."""
         if not self._points:
             return np.zeros(0)
         if len(self._points) > 1:
@@ -118,33 +156,124 @@ class Traced:
     def reset(self) -> None:
         """Forget every call recorded so far."""
         self.calls, self.records, self.errors = 0, [], []
-        self._points, self._kept, self._recorded, self.truncated = [], 0, 0, False
+        self._points: list[np.ndarray] = []
+        self._kept = self._recorded = self._record_bytes = 0
+        self.truncated = False
 
     # -- recording (called by the registry) ------------------------------------
     def record(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> None:
+        """Count one call by student code and keep a bounded record of it; never raises."""
         self.calls += 1
         if len(self.records) < MAX_RECORDED_CALLS:
-            self.records.append(CallRecord(args, kwargs))
-        if args:
-            try:
-                self._add_points(np.array(args[0], dtype=float).reshape(-1))
-            except (TypeError, ValueError):
-                pass
+            self.records.append(self._bounded_record(args, kwargs))
+        at = _evaluated_at(self._first, args, kwargs)
+        points = _as_points(at)
+        if points is None:  # not numbers: still one evaluation, never none
+            self._recorded += max(1, _size(at))
+        else:
+            self._add_points(points)
+
+    def _bounded_record(self, args: tuple[Any, ...], kwargs: dict[str, Any]) -> CallRecord:
+        size = _payload_bytes([args, kwargs], MAX_RECORD_BYTES)
+        if size <= MAX_RECORD_BYTES and self._record_bytes + size <= MAX_RECORDED_BYTES:
+            self._record_bytes += size
+            return CallRecord(args, kwargs)
+        kept = tuple(_summary(a) for a in args[:SUMMARY_ARGUMENTS])
+        named = {str(k)[:100]: _summary(v) for k, v in list(kwargs.items())[:SUMMARY_ARGUMENTS]}
+        return CallRecord(kept, named, complete=False)
 
     def record_tally(self, calls: int, points: np.ndarray, truncated: bool) -> None:
         self.calls += calls
-        self._add_points(points.astype(float, copy=False).reshape(-1))
+        self._add_points(points.reshape(-1))
         self.truncated = self.truncated or truncated
+
+    def record_error(self, text: str) -> None:
+        if len(self.errors) < MAX_KEPT_ERRORS:
+            self.errors.append(text[:500])
 
     def _add_points(self, points: np.ndarray) -> None:
         room = MAX_RECORDED_POINTS - self._kept
         if points.size > room:
             self.truncated = True
         if room > 0:
-            kept = points[:room]
+            # a copy, never a view: a view would keep the student's whole array alive
+            kept = np.array(points[:room], dtype=float)
             self._points.append(kept)
             self._kept += kept.size
         self._recorded += points.size
+
+
+def _first_parameter(function: Callable[..., Any]) -> inspect.Parameter | None:
+    """The first parameter of ``function``, if its signature can be read."""
+    try:
+        parameters = list(inspect.signature(function).parameters.values())
+    except (TypeError, ValueError):  # builtins without a signature (some ufuncs)
+        return None
+    return parameters[0] if parameters else None
+
+
+def _evaluated_at(first: inspect.Parameter | None, args: tuple[Any, ...],
+                  kwargs: dict[str, Any]) -> Any:
+    """Where a call evaluates the function: the value its first parameter gets, however
+    the call was spelled (positional, keyword, starred), else the first argument given."""
+    if first is not None and first.kind is inspect.Parameter.VAR_POSITIONAL:
+        return list(args)
+    if args:
+        return args[0]
+    if first is not None and first.name in kwargs and first.kind is not first.VAR_KEYWORD:
+        return kwargs[first.name]
+    return next(iter(kwargs.values()), None)
+
+
+def _as_points(value: Any) -> np.ndarray | None:
+    """``value`` as a flat float array, or None if it is not numbers (never raises)."""
+    try:
+        array = np.asarray(value)
+        if array.dtype.kind not in "biuf":
+            return None
+        return array.reshape(-1)
+    except Exception:  # ragged lists, ints too large for any dtype, ...: not points
+        return None
+
+
+def _size(value: Any) -> int:
+    if isinstance(value, np.ndarray):
+        return int(value.size)
+    if isinstance(value, (list, tuple, dict)):
+        return len(value)
+    return 1
+
+
+def _payload_bytes(value: Any, stop: int, depth: int = 0) -> int:
+    """About how many bytes ``value`` holds; counting stops early above ``stop``."""
+    if isinstance(value, np.ndarray):
+        return int(value.nbytes)
+    if isinstance(value, (str, bytes)):
+        return len(value)
+    if isinstance(value, dict):
+        value = list(value.values())
+    if isinstance(value, (list, tuple)) and depth < limits.MAX_DEPTH:
+        total = 8 * len(value)
+        for item in value:
+            if total > stop:
+                break
+            total += _payload_bytes(item, stop - total, depth + 1)
+        return total
+    return 16
+
+
+def _summary(value: Any) -> Any:
+    """A small stand-in for an argument: numbers as they are, the rest as a summary."""
+    if isinstance(value, (bool, int, float, complex, np.generic)) or value is None:
+        if isinstance(value, int) and value.bit_length() > 64:
+            return ArgumentSummary("int", (), sample=(f"an int of {value.bit_length()} bits",))
+        return value
+    if isinstance(value, np.ndarray):
+        sample = tuple(value.reshape(-1)[:SUMMARY_VALUES].tolist())
+        return ArgumentSummary("ndarray", tuple(value.shape), value.dtype.str, sample)
+    if isinstance(value, (str, bytes)):
+        return ArgumentSummary(type(value).__name__, (len(value),), sample=(value[:64],))
+    return ArgumentSummary(type(value).__name__, (_size(value),))
 
 
 def traced(function: Callable[..., Any], *, name: str = "f", safe: bool = False) -> Traced:
@@ -207,15 +336,21 @@ def _holds_callable(value: Any, depth: int = 0) -> bool:
 
 
 class CallbackRegistry:
-    """The functions passed in one student call; answers the worker's callback requests."""
+    """The functions passed in one student call; answers the worker's callback requests.
+
+    ``notes`` (a list the caller owns) receives a line for every exception a
+    function raised on the student's arguments, for the instructor's log.
+    """
 
     def __init__(self, *, max_callbacks: int | None = None,
-                 own_ref: Callable[[object], values.CallableRef | None] | None = None) -> None:
+                 own_ref: Callable[[object], values.CallableRef | None] | None = None,
+                 notes: list[str] | None = None) -> None:
         self.functions: dict[str, Traced] = {}
         self.max_callbacks = MAX_CALLBACKS if max_callbacks is None else max_callbacks
         self.callbacks = 0
         self.exceeded = False
         self.check_error: BaseException | None = None
+        self.notes: list[str] = [] if notes is None else notes
         self._own_ref = own_ref
         self._ids: dict[int, str] = {}
 
@@ -294,18 +429,34 @@ class CallbackRegistry:
         function.record(tuple(args), kwargs)
         try:
             value = function.function(*args, **kwargs)
-        except Exception as exc:
-            kind = type(exc).__name__
-            function.errors.append(f"{kind}: {exc}"[:2000])
-            if kind not in _PASSED_ON or isinstance(exc, AutograderError):
-                # NameError, AttributeError, a misused grader API...: the check's own bug,
-                # reported to the instructor after the call, never blamed on the student
-                self.check_error = self.check_error or exc
-                return _error("RuntimeError", "the grader could not evaluate this function")
-            passed = ", ".join(_describe(a) for a in args) or "no arguments"
-            return _error(kind, f"`{function.name}` raised {kind} when called with {passed}: "
-                          "check what your code passes to it")
+        except UsageError as exc:  # a misused grader API: the check's own bug, whatever the
+            self.check_error = self.check_error or exc  # student passed
+            return _error("RuntimeError", "the grader could not evaluate this function")
+        except Exception as exc:  # raised on the student's arguments: the student's error
+            return self._students_error(function, exc, args, kwargs)
         return {"op": "callback-result", "ok": True, "value": value}
+
+    def _students_error(self, function: Traced, exc: Exception, args: list[Any],
+                        kwargs: dict[str, Any]) -> dict[str, Any]:
+        """The answer for an exception the function raised on the student's arguments.
+
+        Whatever its type, it is raised in the student's code (as itself when it is a
+        usual error of bad arguments, else as ``RuntimeError``), with a message naming
+        only the arguments' types and shapes; the instructor's log gets a line, since
+        an exception of an unusual type may also be a bug of the check.
+        """
+        kind = type(exc).__name__[:100]
+        text = f"{kind}: {_text(exc)}"
+        function.record_error(text)
+        passed = ", ".join([_describe(a) for a in args[:SUMMARY_ARGUMENTS]] +
+                           [f"{str(k)[:40]}={_describe(v)}"
+                            for k, v in list(kwargs.items())[:SUMMARY_ARGUMENTS]])
+        if len(self.notes) < MAX_NOTES:
+            self.notes.append(f"`{function.name}` raised {text[:500]} when student code called "
+                              f"it with {passed or 'no arguments'}")
+        return _error(kind if kind in _PASSED_ON else "RuntimeError",
+                      f"`{function.name}` raised {kind} when called with "
+                      f"{passed or 'no arguments'}: check what your code passes to it")
 
 
 def limit_message(name: str, limit: int) -> str:
@@ -336,9 +487,23 @@ def _first_unsupported(value: Any, depth: int = 0) -> values.Unsupported | None:
 
 
 def _describe(value: Any) -> str:
+    """A short description of an argument the student passed (never its whole value)."""
     if isinstance(value, np.ndarray):
         return f"an array of shape {value.shape} and dtype {value.dtype}"
-    if isinstance(value, (int, float, complex, bool)) or value is None:
+    if isinstance(value, bool) or value is None:
         return repr(value)
+    if isinstance(value, int):
+        return repr(value) if value.bit_length() <= 64 else f"an int of {value.bit_length()} bits"
+    if isinstance(value, (float, complex)):
+        return repr(value)
+    if isinstance(value, (list, tuple, dict, str, bytes)):
+        return f"a {type(value).__name__} of length {len(value)}"
     return f"a {type(value).__name__}"
 
+
+def _text(exc: BaseException) -> str:
+    """``str(exc)``, at most 2,000 characters, whatever its ``__str__`` does."""
+    try:
+        return str(exc)[:2000]
+    except Exception:  # an exception whose message cannot be made (a huge int's digits...)
+        return "<no message>"

@@ -12,6 +12,7 @@ import hashlib
 import importlib.util
 import os
 import stat
+import tempfile
 import time
 import traceback
 from dataclasses import dataclass, field, replace
@@ -28,6 +29,7 @@ from autograder.engine.forbidden import (
     scan_sources,
     warm_up,
 )
+from autograder.engine.identify import identify
 from autograder.engine.notebook import Notebook, locked_sources, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
@@ -36,6 +38,12 @@ from autograder.engine.student_process import (
     StudentProcess,
     check_cell_count,
     wall_limit,
+)
+from autograder.engine.submission import (
+    Submission,
+    file_sha256,
+    open_submission,
+    submission_sha256,
 )
 from autograder.errors import NotebookError, WorkerCrashed
 from autograder.results.model import CellError, CheckResult, SubmissionResult
@@ -153,7 +161,7 @@ def _tree_digest(root: Path, *, skip: frozenset[str]) -> str:
                 continue
             path = Path(directory, name)
             digest.update(str(path.relative_to(root)).encode() + b"\0")
-            digest.update(_file_sha256(path).encode())
+            digest.update(file_sha256(path).encode())
     return digest.hexdigest()
 
 
@@ -238,27 +246,43 @@ class Grader:
         """Grade ``path``; write the result folder ``out_dir`` when it is given."""
         start = time.perf_counter()
         sub_id = id or Path(path).stem
-        raw_sha = _file_sha256(path)
+        raw_sha = submission_sha256(Path(path))
         digest = assignment_digest(self.assignment)
         key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
         seed = submission_seed(self.assignment, sub_id)
-        try:
-            _require_regular_file(Path(path))
-            notebook: Notebook | None = restore_locked(
-                read_notebook(path, max_bytes=self.options.max_notebook_bytes), self._locked)
-            check_cell_count(len(notebook.cells))
-            problem = ""
-        except NotebookError as exc:
-            notebook, problem = None, str(exc)
-        if notebook is not None:
-            result = self._grade_notebook(notebook, seed, out_dir, digest)
-        else:
-            result = self._grade_unreadable(problem, seed, out_dir, digest)
+        # -- intake: a notebook, folder or zip -> its files (engine/submission.py), and
+        # whether the notebook is this assignment's (engine/identify.py)
+        with tempfile.TemporaryDirectory(prefix="numgrade-submission-") as scratch:
+            submission = open_submission(Path(path), self.assignment.notebooks,
+                                         scratch=Path(scratch))
+            notebook, problem, notes = self._intake(submission)
+            # -- end of intake (the files stay in ``scratch`` while the submission is graded)
+            if notebook is not None:
+                result = self._grade_notebook(notebook, seed, out_dir, digest)
+            else:
+                result = self._grade_unreadable(problem, seed, out_dir, digest)
+        result = replace(result, notes=notes + result.notes)
         result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
                          execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
         if out_dir is not None:
             write_submission(out_dir, result, title=self.assignment.title)
         return result
+
+    def _intake(self, submission: Submission) -> tuple[Notebook | None, str, tuple[str, ...]]:
+        """The main notebook of ``submission`` (or the problem), and notes for a person."""
+        if submission.problem:
+            return None, submission.problem, submission.notes
+        try:
+            _require_regular_file(submission.notebook)
+            notebook = read_notebook(submission.notebook, max_bytes=self.options.max_notebook_bytes)
+            check_cell_count(len(notebook.cells))
+        except NotebookError as exc:
+            return None, str(exc), submission.notes
+        identity = identify(notebook, self.assignment)
+        if identity.problem:
+            return None, identity.problem, submission.notes
+        return (restore_locked(notebook, self._locked), "",
+                submission.notes + identity.notes)
 
     def _grade_unreadable(self, problem: str, seed: int, out_dir: Path | None,
                           digest: str) -> SubmissionResult:
@@ -427,17 +451,6 @@ def _require_regular_file(path: Path) -> None:
                             "submit the .ipynb file itself.", kind="not-regular")
 
 
-def _file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    try:
-        with open(path, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
-    except OSError as exc:
-        digest.update(f"unreadable:{exc}".encode())
-    return digest.hexdigest()
-
-
 __all__ = ["ENGINE_VERSION", "Grader", "GradingOptions", "assignment_digest", "engine_digest",
            "forget_check_modules", "submission_key", "submission_seed", "summarise_run"]
 
@@ -449,11 +462,11 @@ def error_result(assignment: Assignment, path: Path, sub_id: str, exc: BaseExcep
         detail = exc
     return SubmissionResult(
         id=sub_id, source=str(path), assignment=assignment.name, key="",
-        sha256=_file_sha256(path), outcome="error",
+        sha256=submission_sha256(path), outcome="error",
         output=f"The grader failed on this submission ({detail}); it will be regraded on the next run.",
         tests=(), execution_time=0.0, seed=0)
 
 
 def client_key(path: Path, assignment: Assignment, options: GradingOptions) -> str:
     """The key a result of ``path`` must carry to be reused (computed where the file is)."""
-    return submission_key(_file_sha256(path), assignment, options)
+    return submission_key(submission_sha256(path), assignment, options)

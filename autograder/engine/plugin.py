@@ -166,6 +166,7 @@ class GradingPlugin:
     @pytest.hookimpl(tryfirst=True)
     def pytest_runtest_setup(self, item: pytest.Item) -> None:
         self._log.names.clear()
+        self._log.notes.clear()
         name, _ = check_name(item)
         self._feedback = Feedback(self.context.attachments, name)
         if hasattr(self.context.target, "current_check"):  # for "not run, because ..." messages
@@ -196,6 +197,10 @@ class GradingPlugin:
         points = item_points(item)
         hidden = self._is_hidden(item)
         kind, fraction, message = self._verdict(exc, hidden, name)
+        # the check's functions raised on the student's arguments: the student's error, but
+        # an exception of an unusual type may be the check's bug, so the instructor sees it
+        self.instructor_log.extend(f"{name}: {note}" for note in self._log.notes)
+        self._log.notes.clear()
         attachments = tuple(self._feedback.attachments) if self._feedback else ()
         self.results.append(CheckResult(
             name=name, score=round(points * fraction, 6), max_score=points, output=message,

@@ -9,6 +9,12 @@ any depth of lists, tuples and dicts) is registered in a
 here when the student's code calls it; a function the student returns comes
 back as a :class:`StudentFunction`, which calls into the worker when called,
 with the same time limit, and dies with the submission.
+
+Both directions meet the same bounds as an ordinary call: a returned function's
+errors are built by :func:`~autograder.engine.student_process.answer_error` (the
+same caps, and the fields hidden checks use to show only a short excerpt), and
+figures, in answers or inside returned values, are validated and cut to the
+figure budget here (:mod:`autograder.engine.figuredata`), whatever the worker sent.
 """
 
 from __future__ import annotations
@@ -18,6 +24,8 @@ from typing import Any, Callable, Protocol
 
 from autograder.boundary import values
 from autograder.engine.callbacks import CallbackRegistry, limit_message
+from autograder.engine.figuredata import receive_figures, receive_value
+from autograder.engine.student_process import answer_error
 from autograder.errors import (
     ForbiddenUse,
     MissingFunction,
@@ -52,6 +60,9 @@ class CallLog:
     #: a call into the worker is running (a check's function, answering a callback,
     #: must not call the student's code: the worker is waiting for its answer)
     busy: bool = False
+    #: for the instructor's log: exceptions the check's functions raised on the
+    #: student's arguments (each was raised in the student's code as the student's error)
+    notes: list[str] = field(default_factory=list)
 
 
 class Student:
@@ -100,7 +111,7 @@ class Student:
 
     def figures(self) -> list[Any]:
         """Data of the figures the notebook left open (one dict per figure)."""
-        return self._target.figures(timeout=self._timeout)
+        return receive_figures(self._target.figures(timeout=self._timeout))
 
     # -- functions across the boundary ------------------------------------------
     def _invoke(self, send: Callable[[list[Any], dict[str, Any]], tuple[Any, list[Any]]],
@@ -112,7 +123,7 @@ class Student:
                 f"{what} was called from inside a function given to student code; a check's "
                 "function runs while the student's call waits for it and cannot call the "
                 "student's code. Call it before or after.")
-        registry = CallbackRegistry(own_ref=self._own_ref)
+        registry = CallbackRegistry(own_ref=self._own_ref, notes=self._log.notes)
         plain_args = registry.export(list(args))
         plain_kwargs = registry.export(dict(kwargs))
         answers = hasattr(self._target, "on_callback")
@@ -137,7 +148,7 @@ class Student:
             raise StudentException(f"{what}: " + limit_message(name, registry.max_callbacks))
         returned = f"the function returned by {what}"
         value = values.replace_refs(value, lambda ref: StudentFunction(self, ref, returned))
-        return value, figures
+        return receive_value(value), receive_figures(figures)
 
     def _own_ref(self, value: object) -> values.CallableRef | None:
         if isinstance(value, StudentFunction) and value._student is self:
@@ -152,10 +163,14 @@ class Student:
         answer = request({"op": "call-ref", "id": ref.id, "args": args, "kwargs": kwargs},
                          timeout=self._timeout, what=what)
         if not answer.get("ok"):
-            raise _ref_error(what, answer)
+            if answer.get("error") == "stale-ref":
+                raise WorkerCrashed(f"{what} is gone: your notebook's worker was restarted "
+                                    "after an earlier call stopped it.")
+            # the same error, caps and hidden-check excerpt as a call of a top-level function
+            raise answer_error(what, answer)
         value = answer.get("value")
         if isinstance(value, values.Unsupported):
-            raise UnsupportedValue(f"{what} returned a {value.type}, which the grader cannot "
+            raise UnsupportedValue(f"{what} returned a {value.type[:100]}, which the grader cannot "
                                    "read: return a number, a list or tuple of numbers, or a "
                                    "numpy array.")
         return value, []
@@ -185,17 +200,3 @@ class StudentFunction:
 
         value, _ = self._student._invoke(send, args, kwargs, what=self.what)
         return value
-
-
-def _ref_error(what: str, answer: dict[str, Any]) -> Exception:
-    error = answer.get("error")
-    if error == "exception":
-        return StudentException(f"{what} raised {answer.get('type')}: {answer.get('message', '')}",
-                                traceback=str(answer.get("traceback", "")))
-    if error == "unsupported":
-        return UnsupportedValue(f"{what} returned a value the grader cannot read "
-                                f"({answer.get('message')}).")
-    if error == "stale-ref":
-        return WorkerCrashed(f"{what} is gone: your notebook's worker was restarted after "
-                             "an earlier call stopped it.")
-    return WorkerCrashed(f"{what}: the worker answered {error!r}.")

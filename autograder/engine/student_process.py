@@ -556,11 +556,11 @@ class StudentProcess:
             self.strikes[name] = (count + 1, exc)
             raise
         if not answer.get("ok"):
-            raise _answer_error(name, answer)
+            raise answer_error(name, answer)
         value = answer.get("value")
         if isinstance(value, values.Unsupported):
             raise UnsupportedValue(
-                f"{name} returned a {value.type}, which the grader cannot read: return "
+                f"{name} returned a {value.type[:100]}, which the grader cannot read: return "
                 "a number, a list or tuple of numbers, or a numpy array.")
         return value, list(answer.get("figures", []))
 
@@ -589,7 +589,9 @@ def _describe(message: Any) -> str:
     return f"a frame holding a {type(message).__name__}"
 
 
-def _answer_error(name: str, answer: dict[str, Any]) -> Exception:
+def answer_error(name: str, answer: dict[str, Any]) -> Exception:
+    """The error a failed answer stands for, every field cut to size (the proxy uses it
+    for the functions a student returned, so both kinds of call meet the same caps)."""
     error = answer.get("error")
     if error == "missing":
         return MissingFunction(
@@ -611,7 +613,7 @@ def _answer_error(name: str, answer: dict[str, Any]) -> Exception:
     if error == "unsupported":
         return UnsupportedValue(
             f"{name} returned a value the grader cannot read ({str(answer.get('message'))[:300]}).")
-    return WorkerCrashed(f"{name}: the worker answered {error!r}.")
+    return WorkerCrashed(f"{name}: the worker answered {str(error)[:100]!r}.")
 
 
 def _policy_to_wire(policy: IsolationPolicy) -> dict[str, Any]:

@@ -14,6 +14,9 @@ Status = Literal["passed", "failed"]
 Visibility = Literal["visible", "hidden", "after_due_date", "after_published"]
 #: how grading of a whole submission ended
 Outcome = Literal["graded", "ungradable", "timeout", "crashed", "error"]
+#: how a note about the submission itself starts (a stray copy, an untouched template, deleted
+#: cells): the summary lists every result with one under "needs a person"
+SUBMISSION_NOTE = "About this submission: "
 
 
 @dataclass(frozen=True)

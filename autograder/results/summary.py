@@ -29,7 +29,7 @@ from typing import Any
 
 from autograder.results.feedback import FEEDBACK_NAME, template_environment
 from autograder.results.files import atomic_write_text
-from autograder.results.model import CheckResult, SubmissionResult
+from autograder.results.model import SUBMISSION_NOTE, CheckResult, SubmissionResult
 
 SUMMARY_JSON = "summary.json"
 SUMMARY_HTML = "summary.html"
@@ -44,6 +44,7 @@ HARD_CODING_RULE = (
 CONCERNS = {
     "error": "the grader failed",
     "ungradable": "file could not be graded",
+    "submission": "the submission needs a look",
     "timeout": "a cell ran out of time",
     "crashed": "the worker stopped",
     "check-error": "a check itself failed",
@@ -114,6 +115,19 @@ class Attention:
 
 
 @dataclass(frozen=True)
+class Elsewhere:
+    """A result kept on disk but not in the exports: its file is no longer given, or another
+    file claims its id (``claimed_by``: that file; "" when none)."""
+
+    id: str
+    source: str
+    claimed_by: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "source": self.source, "claimed_by": self.claimed_by}
+
+
+@dataclass(frozen=True)
 class ClassSummary:
     """Everything ``summary.json`` and ``summary.html`` say about a batch.
 
@@ -132,6 +146,10 @@ class ClassSummary:
     mean_seconds: float | None
     total_seconds: float
     attention: tuple[Attention, ...]
+    #: results whose file was not given this time (kept on disk, not exported)
+    no_longer_submitted: tuple[Elsewhere, ...] = ()
+    #: results another file of this run claims the id of (neither is exported)
+    conflicts: tuple[Elsewhere, ...] = ()
 
     @property
     def mean_percent(self) -> float | None:
@@ -155,6 +173,8 @@ class ClassSummary:
             "checks": [c.to_dict() for c in self.checks],
             "mean_seconds": rounded(self.mean_seconds), "total_seconds": rounded(self.total_seconds),
             "attention": [a.to_dict() for a in self.attention],
+            "conflicts": [c.to_dict() for c in self.conflicts],
+            "no_longer_submitted": [g.to_dict() for g in self.no_longer_submitted],
             "hard_coding_rule": HARD_CODING_RULE,
         }
 
@@ -212,6 +232,9 @@ def concerns(result: SubmissionResult) -> tuple[Concern, ...]:
         if names:
             first = next(c.output for c in result.tests if c.kind == kind)
             found.append(Concern(kind, f"{_names(names)}: {_short(first)}"))
+    about = [n[len(SUBMISSION_NOTE):] for n in result.notes if n.startswith(SUBMISSION_NOTE)]
+    if about:
+        found.append(Concern("submission", _short(" ".join(about))))
     review = [n[len(_REVIEW_PREFIX):] for n in result.notes if n.startswith(_REVIEW_PREFIX)]
     if review:
         found.append(Concern("unverified", _short(" ".join(review))))
@@ -243,8 +266,13 @@ def needs_attention(results: Sequence[SubmissionResult]) -> tuple[Attention, ...
                                                     else len(order) for c in a.concerns), a.id)))
 
 
-def summarise(results: Sequence[SubmissionResult], *, assignment: str = "") -> ClassSummary:
-    """The class summary of ``results`` (one per submission, reused ones included)."""
+def summarise(results: Sequence[SubmissionResult], *, assignment: str = "",
+              elsewhere: Sequence[Elsewhere] = ()) -> ClassSummary:
+    """The class summary of ``results`` (one per submission, reused ones included).
+
+    ``elsewhere``: results of the folder left out of ``results`` (no longer submitted,
+    or in conflict with a file of this run).
+    """
     scored = [r for r in results if r.outcome != "error"]
     outcomes: dict[str, int] = {}
     for result in results:
@@ -256,7 +284,9 @@ def summarise(results: Sequence[SubmissionResult], *, assignment: str = "") -> C
         submissions=len(results), scored=len(scored), outcomes=tuple(sorted(outcomes.items())),
         percents=percents, histogram=histogram(percents), checks=check_stats(scored),
         mean_seconds=statistics.fmean(seconds) if seconds else None,
-        total_seconds=sum(seconds), attention=needs_attention(results))
+        total_seconds=sum(seconds), attention=needs_attention(results),
+        no_longer_submitted=tuple(e for e in elsewhere if not e.claimed_by),
+        conflicts=tuple(e for e in elsewhere if e.claimed_by))
 
 
 # -- the page -------------------------------------------------------------------
@@ -288,7 +318,8 @@ def render_summary(summary: ClassSummary, *, title: str | None = None) -> str:
 
 
 def write_summary(out_dir: Path, results: Sequence[SubmissionResult], *,
-                  title: str | None = None, assignment: str = "") -> ClassSummary:
+                  title: str | None = None, assignment: str = "",
+                  elsewhere: Sequence[Elsewhere] = ()) -> ClassSummary:
     """Write ``summary.json`` and ``summary.html`` into ``out_dir`` atomically.
 
     Parameters
@@ -301,13 +332,15 @@ def write_summary(out_dir: Path, results: Sequence[SubmissionResult], *,
         The assignment's title for the page heading.
     assignment : str, optional
         The assignment's name (default: the one recorded in the results).
+    elsewhere : sequence of Elsewhere, optional
+        Results of the folder not in ``results``, listed apart.
 
     Returns
     -------
     ClassSummary
         What was written.
     """
-    summary = summarise(results, assignment=assignment)
+    summary = summarise(results, assignment=assignment, elsewhere=elsewhere)
     atomic_write_text(out_dir / SUMMARY_JSON,
                       json.dumps(summary.to_dict(), indent=2, ensure_ascii=False))
     atomic_write_text(out_dir / SUMMARY_HTML, render_summary(summary, title=title))
@@ -325,6 +358,7 @@ __all__ = [
     "CheckStats",
     "ClassSummary",
     "Concern",
+    "Elsewhere",
     "check_stats",
     "concerns",
     "histogram",

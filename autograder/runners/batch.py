@@ -14,19 +14,20 @@ import os
 import re
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Iterable, Mapping, Sequence
 
 from tqdm import tqdm
 
 from autograder.engine.assignment import Assignment
 from autograder.engine.grader import GradingOptions, client_key, error_result
 from autograder.engine.slot import GradingSlot
+from autograder.engine.submission import IGNORED_FOLDERS
 from autograder.errors import UsageError
 from autograder.results.model import SubmissionResult
 from autograder.results.store import read_result, refresh_feedback, write_grades, write_submission
-from autograder.results.summary import write_summary
+from autograder.results.summary import Elsewhere, write_summary
 from autograder.runners.backends import make_backend
 from autograder.runners.jobs import DaskSpec, Job
 
@@ -51,6 +52,8 @@ class BatchRun:
     folder: tuple[SubmissionResult, ...] = ()
     #: submissions left to other shards (``--shard K/N``)
     other_shards: int = 0
+    #: (id, file) of submissions not graded because the id's result is another file's
+    conflicts: tuple[tuple[str, str], ...] = ()
 
     @property
     def failed(self) -> tuple[SubmissionResult, ...]:
@@ -86,58 +89,118 @@ class Shard:
         return value % self.count == self.index
 
 
-def collect_submissions(paths: Iterable[Path]) -> list[Path]:
-    """Expand folders to the notebooks inside them; keep explicit files as given."""
+def collect_submissions(paths: Iterable[Path], assignment: str | None = None) -> list[Path]:
+    """The submissions in ``paths``: notebooks, zips, and nbgrader's assignment folders.
+
+    A folder laid out as nbgrader's ``submitted/<student>/<assignment>/`` (a folder named
+    ``submitted``, or one with a ``<student>/<assignment>`` folder inside) gives one
+    submission per student: the folder named ``assignment``; other assignments' folders
+    are left alone. Any other folder gives the notebooks and zips below it. Explicit
+    files are kept as given.
+    """
     found: list[Path] = []
     for path in map(Path, paths):
         if path.is_dir() and not path.is_symlink():
-            found += _notebooks_below(path)
+            found += _submissions_below(path, assignment)
         elif path.exists() or path.is_symlink():
             found.append(path)
         else:
-            raise UsageError(f"Submission {str(path)!r} does not exist; pass a notebook "
-                             "file or a folder of notebooks.")
+            raise UsageError(f"Submission {str(path)!r} does not exist; pass a notebook, a zip "
+                             "or a folder of them.")
     # Absolute, never resolved: a link stays a link (and is refused with a result
     # saying why) instead of becoming the file it points to under another id.
     unique = list(dict.fromkeys(Path(os.path.abspath(p)) for p in found))
     if not unique:
-        raise UsageError("No notebooks (*.ipynb) were found in the submissions given.")
+        where = (f"; in nbgrader's layout, the folders submitted/<student>/{assignment}/"
+                 if assignment else "")
+        raise UsageError("No notebooks (*.ipynb) or zips were found in the submissions "
+                         f"given{where}.")
     return unique
 
 
-def _notebooks_below(folder: Path) -> list[Path]:
-    """``*.ipynb`` entries under ``folder``, links included, without following linked folders."""
+def _submissions_below(folder: Path, assignment: str | None) -> list[Path]:
+    if assignment is not None:
+        if folder.name == assignment and folder.parent.parent.name == "submitted":
+            return [folder]  # submitted/<student>/<assignment>/ itself
+        if folder.parent.name == "submitted" and (folder / assignment).is_dir():
+            return [folder / assignment]  # one student's folder
+        students = [d for d in sorted(folder.iterdir())
+                    if d.is_dir() and not d.is_symlink() and d.name not in IGNORED_FOLDERS]
+        if folder.name == "submitted" or any((d / assignment).is_dir() for d in students):
+            return [d / assignment for d in students if (d / assignment).is_dir()
+                    and not (d / assignment).is_symlink()] + _loose_files(folder)
+    return _files_below(folder, assignment)
+
+
+def _loose_files(folder: Path) -> list[Path]:
+    return [p for p in sorted(folder.iterdir()) if not p.is_dir() and _is_submission(p.name)]
+
+
+def _is_submission(name: str) -> bool:
+    return name.endswith(".ipynb") or name.lower().endswith(".zip")
+
+
+def _files_below(folder: Path, assignment: str | None = None) -> list[Path]:
+    """Notebooks and zips under ``folder``, links included, without following linked folders;
+    a ``submitted`` folder below is read as nbgrader's layout (with ``assignment``)."""
     found = []
     for directory, subdirs, files in os.walk(folder, followlinks=False):
-        subdirs[:] = sorted(d for d in subdirs if d != ".ipynb_checkpoints")
-        found += [Path(directory, name) for name in sorted(files) if name.endswith(".ipynb")]
+        if assignment is not None and "submitted" in subdirs:
+            subdirs.remove("submitted")
+            found += _submissions_below(Path(directory, "submitted"), assignment)
+        subdirs[:] = sorted(d for d in subdirs if d not in IGNORED_FOLDERS)
+        found += [Path(directory, name) for name in sorted(files) if _is_submission(name)]
     return found
 
 
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "-", text).strip("-.") or "submission"
+#: the characters an id keeps as they are; every other is written ``~XX`` (UTF-8, hex)
+_SAFE = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789._-")
+#: joins the parts of an id that needs more than a name; never in an escaped name
+_JOIN = "+"
+
+
+def escape_id(name: str) -> str:
+    """``name`` as an id: safe characters kept, others (``~`` too) written ``~XX``.
+
+    Injective (``alice``, ``alice!`` and ``alice `` stay three ids: ``alice``,
+    ``alice~21``, ``alice~20``), never hidden (a leading ``.`` is escaped) and never
+    a path (``/`` is escaped).
+    """
+    out = []
+    for k, char in enumerate(name):
+        if char in _SAFE and not (k == 0 and char == "."):
+            out.append(char)
+        else:
+            out.extend(f"~{b:02X}" for b in char.encode("utf-8", "surrogateescape"))
+    return "".join(out) or "~"
 
 
 def place_name(path: Path) -> str:
-    """The name a file's place gives it: ``<student>`` in nbgrader's layout, else the stem.
+    """The name a submission's place gives it: ``<student>`` in nbgrader's layout, else the stem.
 
     nbgrader keeps submissions as ``submitted/<student>/<assignment>/<notebook>.ipynb``;
-    the student's folder is what an LMS roster knows, whether one file or the
-    whole ``submitted/`` folder is given.
+    the student's folder is what an LMS roster knows, whether one file, one
+    assignment folder or the whole ``submitted/`` folder is given.
     """
     parts = path.parts
     if len(parts) >= 4 and parts[-4] == "submitted":
         return parts[-3]
+    if path.is_dir() and len(parts) >= 3 and parts[-3] == "submitted":
+        return parts[-2]
+    if path.is_dir() and len(parts) >= 2:
+        return parts[-2]  # <student>/<assignment>/ outside a folder named submitted
     return path.stem
 
 
 def assign_ids(paths: Sequence[Path]) -> dict[Path, str]:
-    """Readable unique ids from each file's place (see :func:`place_name`).
+    """Readable ids, one per submission, from each one's place (see :func:`place_name`).
 
-    When names collide, the stem and then the folders that tell the files apart
-    are added: two notebooks of one student become ``alice-hull`` and
-    ``alice-extra``; ``a/x.ipynb`` and ``b/x.ipynb`` become ``a-x`` and ``b-x``.
-    An id is never a name the batch writes itself (``grades.csv``, ``summary.html``...).
+    The mapping is injective: a name is escaped (:func:`escape_id`), never
+    shortened, so distinct names never share an id. When two submissions have the
+    same name, the file's stem and then as many folders as tell them apart are
+    joined with ``+`` (never in an escaped name) after the name: ``alice+hull`` and
+    ``alice+extra``; ``a/x.ipynb`` and ``b/x.ipynb`` become ``x+a`` and ``x+b``. A name the batch writes itself (``grades.csv``...) gets a
+    trailing ``+``.
     """
     ids: dict[Path, str] = {}
     by_name: dict[str, list[Path]] = {}
@@ -145,37 +208,22 @@ def assign_ids(paths: Sequence[Path]) -> dict[Path, str]:
         by_name.setdefault(place_name(path), []).append(path)
     for name, group in by_name.items():
         if len(group) == 1:
-            ids[group[0]] = _slug(name)
+            ids[group[0]] = escape_id(name)
             continue
-        with_stem = [name if p.stem == name else f"{name}-{p.stem}" for p in group]
-        if len(set(with_stem)) == len(group):
-            ids.update(zip(group, map(_slug, with_stem)))
-            continue
-        ids.update(_by_folders(group))
-    taken: dict[str, int] = {}
-    for path in paths:  # a last resort for ids that still collide after slugging
-        base = ids[path]
-        if base.lower() in RESERVED_NAMES:
-            base = f"{base}-submission"
-        taken[base] = taken.get(base, 0) + 1
-        ids[path] = base if taken[base] == 1 else f"{base}-{taken[base]}"
-    return ids
+        with_stem = [(name,) if p.stem == name else (name, p.stem) for p in group]
+        if len(set(with_stem)) != len(group):
+            with_stem = [(name, *_telling_folders(p, group, name)) for p in group]
+        ids.update((p, _JOIN.join(map(escape_id, parts))) for p, parts in zip(group, with_stem))
+    return {p: i + _JOIN if i.lower() in RESERVED_NAMES else i for p, i in ids.items()}
 
 
-def _by_folders(group: Sequence[Path]) -> dict[Path, str]:
-    """Ids from the stem and as many parent folders as it takes to tell ``group`` apart."""
+def _telling_folders(path: Path, group: Sequence[Path], name: str) -> tuple[str, ...]:
+    """As many parent folders as it takes to tell ``group`` apart, then the stem unless it
+    is ``name``."""
     depth = 1
-    while depth < 64:
-        labels = [tuple(p.parts[-1 - depth:-1]) for p in group]
-        if len(set(labels)) == len(group):
-            break
+    while depth < 64 and len({tuple(p.parts[-1 - depth:]) for p in group}) < len(group):
         depth += 1
-    ids = {}
-    for path in group:
-        parts = list(path.parts[-1 - depth:-1]) + [path.stem]
-        deduped = [q for i, q in enumerate(parts) if i == 0 or q != parts[i - 1]]
-        ids[path] = _slug("-".join(deduped))
-    return ids
+    return (*path.parts[-1 - depth:-1], *((path.stem,) if path.stem != name else ()))
 
 
 def folder_results(out_dir: Path, assignment: str) -> tuple[SubmissionResult, ...]:
@@ -200,12 +248,44 @@ def folder_results(out_dir: Path, assignment: str) -> tuple[SubmissionResult, ..
     return tuple(found)
 
 
-def write_exports(out_dir: Path, assignment: Assignment) -> tuple[SubmissionResult, ...]:
-    """Rewrite ``grades.csv``, ``summary.json`` and ``summary.html`` from every result in the folder."""
+def write_exports(out_dir: Path, assignment: Assignment,
+                  given: Mapping[str, str] | None = None) -> tuple[SubmissionResult, ...]:
+    """Rewrite ``grades.csv``, ``summary.json`` and ``summary.html``; return the exported results.
+
+    ``given``: this run's submissions (id -> source). Only results of those are
+    exported; the folder's other results stay on disk and are listed in the summary
+    as no longer submitted, or as a conflict when another file claims their id.
+    None: every result in the folder (a folder put together by hand or by a merge).
+    """
     results = folder_results(out_dir, assignment.name)
+    elsewhere: list[Elsewhere] = []
+    if given is not None:
+        kept = []
+        for result in results:
+            if result.id not in given:
+                elsewhere.append(Elsewhere(result.id, result.source))
+            elif given[result.id] != result.source:
+                elsewhere.append(Elsewhere(result.id, result.source, claimed_by=given[result.id]))
+            else:
+                kept.append(result)
+        results = tuple(kept)
     write_grades(out_dir, results)
-    write_summary(out_dir, results, title=assignment.title, assignment=assignment.name)
+    write_summary(out_dir, results, title=assignment.title, assignment=assignment.name,
+                  elsewhere=elsewhere)
     return results
+
+
+def claimed_elsewhere(previous: SubmissionResult | None, path: Path,
+                      given: Iterable[str]) -> bool:
+    """True when ``previous``, the result in ``path``'s id folder, is another file's.
+
+    That file still exists and is not given in this run (when it is, it has an id
+    of its own and this folder's result is simply out of date); a result whose file
+    was moved or removed is ``path``'s to replace.
+    """
+    if previous is None or not previous.source or previous.source == str(path):
+        return False
+    return os.path.lexists(previous.source) and previous.source not in set(given)
 
 
 def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Path, *,
@@ -228,22 +308,32 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
         raise UsageError("--jobs sets the local pool's size; with --dask the cluster's grading "
                          "slots set how many run at once (local:N, or `autograder worker --slots N`).")
     options = options or GradingOptions()
-    paths = collect_submissions(submissions)
+    paths = collect_submissions(submissions, assignment.name)
     ids = assign_ids(paths)
+    given = {ids[p]: str(p) for p in paths}
     if shard is not None:
         paths = [p for p in paths if shard.holds(ids[p])]
     out_dir.mkdir(parents=True, exist_ok=True)
     folder_results(out_dir, assignment.name)  # refuse another assignment's folder before grading
     done: dict[str, SubmissionResult] = {}
     todo: list[Job] = []
+    conflicts: list[Path] = []
     for path in paths:
         previous = read_result(out_dir / ids[path])
+        if claimed_elsewhere(previous, path, given.values()):
+            conflicts.append(path)  # never graded over another file's result
+            continue
         key = client_key(path, assignment, options)
         if previous is not None and previous.key == key and previous.outcome != "error":
+            if previous.source != str(path):  # the same file, moved: the result follows it
+                previous = write_submission(out_dir / ids[path],
+                                            replace(previous, source=str(path)),
+                                            title=assignment.title)
             done[ids[path]] = previous
             refresh_feedback(out_dir / ids[path], previous, title=assignment.title)
         else:
             todo.append(Job(path, ids[path]))
+    paths = [p for p in paths if p not in conflicts]
     reused = len(done)
     bar = tqdm(total=len(paths), initial=reused, unit="nb", desc=assignment.name,
                disable=(not sys.stderr.isatty()) if progress is None else not progress)
@@ -268,7 +358,8 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
     for job in missing:  # a backend must answer for every job; if not, say so as an error
         result = error_result(assignment, job.path, job.id, "no result came back for it")
         finished(write_submission(out_dir / job.id, result, title=assignment.title))
-    folder = write_exports(out_dir, assignment)
+    folder = write_exports(out_dir, assignment, given)
     return BatchRun(results=tuple(done[ids[p]] for p in paths), graded=len(todo),
-                       reused=reused, seconds=time.perf_counter() - start, folder=folder,
-                       other_shards=len(ids) - len(paths))
+                    reused=reused, seconds=time.perf_counter() - start, folder=folder,
+                    other_shards=len(ids) - len(paths) - len(conflicts),
+                    conflicts=tuple((ids[p], str(p)) for p in conflicts))

@@ -46,6 +46,7 @@ from distributed.security import Security
 
 from autograder.engine.assignment import Assignment
 from autograder.engine.grader import Grader, GradingOptions, client_key, error_result
+from autograder.engine.submission import submission_bytes
 from autograder.errors import EngineError, UsageError
 from autograder.results.feedback import FEEDBACK_NAME
 from autograder.results.files import atomic_write_bytes
@@ -363,7 +364,7 @@ class DaskBackend:
                 capacity, checked = max(1, grading_slots(client)), time.monotonic()
             while queue and len(running) < capacity:
                 job = queue.popleft()
-                running[client.submit(grade_task, plugin, job.path.read_bytes(), job.path.name, job.id,
+                running[client.submit(grade_task, plugin, *submission_bytes(job.path), job.id,
                                       key=f"grade-{job.id}-{uuid.uuid4().hex[:8]}",
                                       resources={RESOURCE: 1}, pure=False)] = job
 

@@ -23,6 +23,7 @@ from fastapi.staticfiles import StaticFiles
 from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.service import api_routes, pages_staff, pages_student
+from autograder.service.bounds import BodyLimit
 from autograder.service.course import Course
 from autograder.service.storage import Storage
 from autograder.service.web import HERE, NeedSignIn, Service, http_error, need_sign_in, security_headers
@@ -35,6 +36,9 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
     app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
     app.state.service = Service(course, factory, Storage(course.data_dir),
                                 secret or secrets.token_bytes(32))
+    # the innermost middleware, so the routes' parsers read the body through it directly and
+    # its 413 reaches the routes' handlers as it is (not wrapped by another middleware's task group)
+    app.add_middleware(BodyLimit, max_upload_bytes=course.max_upload_bytes)
     app.middleware("http")(security_headers)
     app.add_exception_handler(NeedSignIn, need_sign_in)
     app.add_exception_handler(HTTPException, http_error)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import datetime as dt
 import hashlib
 import hmac
 import io
@@ -11,11 +12,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
 from autograder.errors import UsageError
-from autograder.service.models import BrowserLogin, User
+from autograder.service.models import BrowserLogin, User, utcnow
 
 ROLES = ("student", "ta", "instructor")
 STAFF = ("ta", "instructor")
@@ -50,18 +51,32 @@ def open_session(session: Session, user: User) -> str:
     """Start a browser session for ``user``; return the cookie value."""
     cookie = secrets.token_urlsafe(32)
     session.add(BrowserLogin(id_hash=token_hash(cookie), user_id=user.id,
-                           csrf=secrets.token_urlsafe(24)))
+                           csrf=secrets.token_urlsafe(24), created_at=utcnow()))
     return cookie
 
 
-def find_session(session: Session, cookie: str | None) -> SignedIn | None:
+def find_session(session: Session, cookie: str | None, *, lifetime: dt.timedelta,
+                 now: dt.datetime | None = None) -> SignedIn | None:
+    """The browser session of ``cookie`` if it began less than ``lifetime`` ago."""
     if not cookie or len(cookie) > 200:
         return None
     row = session.get(BrowserLogin, token_hash(cookie))
-    if row is None:
-        return None
+    if row is None or row.created_at + lifetime <= (now or utcnow()):
+        return None  # expired rows are deleted at the next sign-in (end_expired_sessions)
     user = session.get(User, row.user_id)
     return None if user is None else SignedIn(user.id, user.role, row.csrf)
+
+
+def end_expired_sessions(session: Session, *, lifetime: dt.timedelta,
+                         now: dt.datetime | None = None) -> None:
+    session.execute(delete(BrowserLogin).where(BrowserLogin.created_at <= (now or utcnow()) - lifetime))
+
+
+def end_sessions(session: Session, user_ids: Iterable[str]) -> None:
+    """Sign every browser of these users out (their tokens changed)."""
+    ids = list(user_ids)
+    if ids:
+        session.execute(delete(BrowserLogin).where(BrowserLogin.user_id.in_(ids)))
 
 
 def close_session(session: Session, cookie: str | None) -> None:
@@ -110,32 +125,70 @@ def read_roster(path: Path) -> list[RosterEntry]:
     return entries
 
 
-def import_roster(session: Session, entries: Iterable[RosterEntry]) -> list[tuple[User, str]]:
-    """Add or update roster entries; new users get a token. Return (user, token) for those."""
+@dataclass(frozen=True)
+class RosterChanges:
+    """What importing a roster did: who was added, who was there already, the new tokens."""
+
+    added: tuple[str, ...]
+    already: tuple[str, ...]
+    issued: tuple[tuple[User, str], ...]
+
+
+def import_roster(session: Session, entries: Iterable[RosterEntry]) -> RosterChanges:
+    """Add new people (with a token) and update the name, email and role of the others.
+
+    Nobody's token changes: someone already on the roster keeps the token they
+    have (only someone without one, such as a person added by hand, gets one).
+    """
     issued: list[tuple[User, str]] = []
+    added: list[str] = []
+    already: list[str] = []
     for entry in entries:
         user = session.get(User, entry.id)
         if user is None:
             user = User(id=entry.id, name=entry.name, email=entry.email, role=entry.role)
             session.add(user)
+            added.append(entry.id)
         else:
             user.name, user.email, user.role = entry.name, entry.email, entry.role
+            already.append(entry.id)
         if user.token_hash is None:
             token = new_token()
             user.token_hash = token_hash(token)
             issued.append((user, token))
-    return issued
+    return RosterChanges(tuple(added), tuple(already), tuple(issued))
 
 
 def issue_tokens(session: Session, *, everyone: bool) -> list[tuple[User, str]]:
-    """New tokens for users without one (or for everyone, which revokes the old ones)."""
+    """New tokens for users without one (or for everyone, which revokes the old ones).
+
+    A new token also signs out every browser its holder had signed in with the
+    old one: rotating tokens is how an instructor ends a leaked token's sessions.
+    """
     issued: list[tuple[User, str]] = []
     for user in session.scalars(select(User).order_by(User.id)):
         if everyone or user.token_hash is None:
             token = new_token()
             user.token_hash = token_hash(token)
             issued.append((user, token))
+    end_sessions(session, (user.id for user, _ in issued))
     return issued
+
+
+def kept_tokens(session: Session, text: str, *, besides: Iterable[str]) -> list[tuple[User, str]]:
+    """Rows of an earlier tokens CSV whose token is still the holder's (not those in ``besides``).
+
+    A token that no longer matches the database (rotated since) is left out: it opens nothing.
+    """
+    skip = set(besides)
+    kept: list[tuple[User, str]] = []
+    for row in csv.DictReader(io.StringIO(text)):
+        uid, token = (row.get("id") or "").strip(), (row.get("token") or "").strip()
+        user = session.get(User, uid) if uid and uid not in skip else None
+        if user is not None and token and user.token_hash == token_hash(token):
+            kept.append((user, token))
+            skip.add(uid)
+    return kept
 
 
 def tokens_csv(issued: Iterable[tuple[User, str]]) -> str:

@@ -15,6 +15,7 @@ from typing import Any, Literal
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from autograder.errors import UsageError
+from autograder.service.settings import SESSION_HOURS
 
 Counting = Literal["last", "best"]
 DAY = dt.timedelta(days=1)
@@ -71,6 +72,8 @@ class Course:
     trusted_header: str | None = None
     trusted_proxies: tuple[str, ...] = ("127.0.0.1", "::1")
     max_tries: int = 3
+    #: how long a browser session lasts after sign-in
+    session_lifetime: dt.timedelta = dt.timedelta(hours=SESSION_HOURS)
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def assignment(self, name: str) -> AssignmentPolicy | None:
@@ -79,7 +82,7 @@ class Course:
 
 _COURSE_KEYS = {"name", "roster", "database", "data", "submissions_per_hour", "max_upload_bytes",
                 "timezone", "max_tries"}
-_AUTH_KEYS = {"trusted_header", "trusted_proxies"}
+_AUTH_KEYS = {"trusted_header", "trusted_proxies", "session_hours"}
 _ASSIGNMENT_KEYS = {"name", "assignment", "title", "opens", "deadline", "late_penalty_per_day",
                     "max_late_days", "count", "public_only", "extensions"}
 
@@ -123,6 +126,7 @@ def load_course(path: str | Path) -> Course:
         max_tries=_positive(path, "course", "max_tries", course.get("max_tries", 3)),
         trusted_header=auth.get("trusted_header") or None,
         trusted_proxies=tuple(auth.get("trusted_proxies", ("127.0.0.1", "::1"))),
+        session_lifetime=_hours(path, "auth", "session_hours", auth.get("session_hours", SESSION_HOURS)),
     )
 
 
@@ -154,6 +158,13 @@ def _positive(path: Path, table: str, key: str, value: Any) -> int:
     if not isinstance(value, int) or isinstance(value, bool) or value < 1:
         raise UsageError(f"{path}: [{table}] {key} must be a whole number >= 1; got {value!r}.")
     return value
+
+
+def _hours(path: Path, table: str, key: str, value: Any) -> dt.timedelta:
+    if not isinstance(value, (int, float)) or isinstance(value, bool) or not 0 < value <= 24 * 366:
+        raise UsageError(f"{path}: [{table}] {key} must be a number of hours above 0 (12 is "
+                         f"half a day, 0.5 half an hour); got {value!r}.")
+    return dt.timedelta(hours=value)
 
 
 def _when(path: Path, where: str, value: Any, zone: ZoneInfo) -> dt.datetime:

@@ -13,8 +13,10 @@ from pathlib import Path
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
+from autograder.engine.assignment import load_assignment
+from autograder.engine.identify import identify
 from autograder.engine.notebook import parse_notebook
-from autograder.errors import NotebookError, UploadRejected
+from autograder.errors import AssignmentError, NotebookError, UploadRejected
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
@@ -37,19 +39,50 @@ def check_notebook(data: bytes, max_bytes: int) -> None:
                              status=422) from None
 
 
+def precheck(factory: sessionmaker[Session], course: Course, *, user_id: str, assignment: str,
+             now: dt.datetime | None = None) -> AssignmentPolicy:
+    """Refuse an upload the assignment or the hourly limit would refuse, before it is read.
+
+    The service calls this right after signing the user in, so an upload over the
+    limit costs one database read, not the reading and parsing of its body.
+    """
+    policy = course.assignment(assignment)
+    if policy is None:
+        raise UploadRejected(f"There is no assignment {assignment!r} in this course.", status=404)
+    now = now or utcnow()
+    with factory() as session:
+        _check_open(session, policy, user_id, now)
+        _check_rate(session, course, user_id, assignment, now)
+    return policy
+
+
+def check_assignment(data: bytes, policy: AssignmentPolicy, filename: str) -> None:
+    """Raise :class:`UploadRejected` when ``data`` is another assignment's notebook.
+
+    A notebook of another assignment would be graded as a zero that nobody asked
+    for (:mod:`autograder.engine.identify` says whose it is).
+    """
+    try:
+        assignment = load_assignment(policy.spec)
+    except AssignmentError:  # the grader reports a broken assignment with the submission
+        return
+    notebook = parse_notebook(data, path=Path(filename or "notebook.ipynb").name)
+    problem = identify(notebook, assignment).problem
+    if problem:
+        raise UploadRejected(f"This upload was not accepted: {problem[0].upper()}{problem[1:]} "
+                             "Nothing was stored.", status=422)
+
+
 def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, user_id: str,
            assignment: str, filename: str, data: bytes,
            now: dt.datetime | None = None) -> Submission:
     """Check an upload and queue it; raise :class:`UploadRejected` with the reason otherwise."""
-    policy = course.assignment(assignment)
-    if policy is None:
-        raise UploadRejected(f"There is no assignment {assignment!r} in this course.", status=404)
     if len(data) > course.max_upload_bytes:  # before parsing anything
         check_notebook(data, course.max_upload_bytes)
     now = now or utcnow()
-    with factory() as session:
-        _check_open(session, policy, user_id, now)
+    policy = precheck(factory, course, user_id=user_id, assignment=assignment, now=now)
     check_notebook(data, course.max_upload_bytes)
+    check_assignment(data, policy, filename)
     with factory.begin() as session:
         session.execute(select(User).where(User.id == user_id).with_for_update()).scalar_one()
         deadline = _check_open(session, policy, user_id, now)

@@ -41,6 +41,19 @@ class BrowserLogin(Base):
     created_at: Mapped[dt.datetime] = mapped_column(DateTime, default=utcnow)
 
 
+class SignInFailure(Base):
+    """Wrong access tokens from one client address in the current window (the sign-in throttle).
+
+    Kept in the database, not in a process, so every service process counts the same failures.
+    """
+
+    __tablename__ = "sign_in_failures"
+    client: Mapped[str] = mapped_column(String(64), primary_key=True)
+    failures: Mapped[int] = mapped_column(Integer, default=0)
+    window_start: Mapped[dt.datetime] = mapped_column(DateTime, default=utcnow, index=True)
+    locked_until: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
+
+
 class Extension(Base):
     """A deadline set by the instructor for one student on one assignment."""
 

@@ -18,7 +18,7 @@ from autograder.errors import UploadRejected
 from autograder.service import auth
 from autograder.service.api_routes import submission_view
 from autograder.service.course import AssignmentPolicy
-from autograder.service.intake import accept
+from autograder.service.intake import accept, precheck
 from autograder.service.models import utcnow
 from autograder.service.standing import final_score, standing, time_left
 from autograder.service.web import (
@@ -32,8 +32,10 @@ from autograder.service.web import (
     SignedIn,
     Who,
     check_csrf,
+    client_address,
     safe_next,
     upload_form,
+    wait_message,
     wants_json,
 )
 
@@ -57,28 +59,47 @@ def login_page(svc: ServiceState, next: str = "/") -> Response:
     return response
 
 
-def _open_session(factory: sessionmaker[Session], token: str) -> str | None:
-    """A new session cookie for the holder of ``token``, or ``None`` for a wrong token."""
-    with factory.begin() as session:
+def _open_session(svc: Service, token: str, address: str) -> str | int:
+    """A new session cookie for the holder of ``token``; for a wrong token, the seconds
+    ``address`` must now wait (0: it may try again at once)."""
+    with svc.factory.begin() as session:
         user = auth.user_for_token(session, token)
-        return None if user is None else auth.open_session(session, user)
+        if user is not None:
+            auth.end_expired_sessions(session, lifetime=svc.course.session_lifetime)
+            return auth.open_session(session, user)
+    return svc.wrong_token(address)
+
+
+def _login_page(svc: Service, nonce: str, target: str, *, status: int, error: str,
+                wait: int = 0) -> Response:
+    response = svc.page("login.html.j2", None, status=status, csrf=nonce, next=target, error=error)
+    if wait:
+        response.headers["Retry-After"] = str(wait)
+    return response
 
 
 @router.post("/login")
 async def login(request: Request, svc: ServiceState) -> Response:
-    form = await request.form(max_fields=10)
-    nonce = request.cookies.get(LOGIN_COOKIE)
+    address = client_address(request)
+    nonce = request.cookies.get(LOGIN_COOKIE) or ""
+    wait = await run_in_threadpool(svc.sign_in_wait, address)  # before reading the form
+    if wait:
+        return _login_page(svc, nonce, "/", status=429, error=wait_message(wait), wait=wait)
+    form = await request.form(max_files=0, max_fields=10, max_part_size=4096)
     if not nonce or not auth.same_secret(str(form.get("csrf", "")), nonce):
         raise HTTPException(403, "The sign-in form is out of date; reload it and try again.")
     token = str(form.get("token", "")).strip()
     target = safe_next(str(form.get("next", "/")))
-    cookie = await run_in_threadpool(_open_session, svc.factory, token)
-    if cookie is None:
-        return svc.page("login.html.j2", None, status=401, csrf=nonce, next=target,
-                        error="That access token is not valid. Copy it again from the "
-                              "message your instructor sent.")
+    cookie = await run_in_threadpool(_open_session, svc, token, address)
+    if not isinstance(cookie, str):
+        if cookie:
+            return _login_page(svc, nonce, target, status=429, error=wait_message(cookie), wait=cookie)
+        return _login_page(svc, nonce, target, status=401,
+                           error="That access token is not valid. Copy it again from the "
+                                 "message your instructor sent.")
     response = RedirectResponse(target, status_code=303)
-    response.set_cookie(SESSION_COOKIE, cookie, httponly=True, samesite="lax", path="/")
+    response.set_cookie(SESSION_COOKIE, cookie, httponly=True, samesite="lax", path="/",
+                        max_age=int(svc.course.session_lifetime.total_seconds()))
     response.delete_cookie(LOGIN_COOKIE, path="/login")
     return response
 
@@ -127,6 +148,8 @@ def assignment_page(who: SignedIn, policy: Assignment, svc: ServiceState) -> Res
 async def submit(request: Request, name: str, who: SignedIn, policy: Assignment,
                  svc: ServiceState) -> Response:
     try:
+        # the assignment's dates and the hourly limit first: a refused upload is never read
+        await run_in_threadpool(precheck, svc.factory, svc.course, user_id=who.id, assignment=name)
         form = await upload_form(request, svc)
         check_csrf(who, form, request)
         upload = form.get("notebook")

@@ -5,12 +5,14 @@ from __future__ import annotations
 import dataclasses
 import os
 import secrets
+from dataclasses import dataclass
 from pathlib import Path
 
 from sqlalchemy import func, select
 
 from autograder.engine.assignment import load_assignment
 from autograder.errors import UsageError
+from autograder.results.files import atomic_write_bytes
 from autograder.runners.backends import load_dask_backend
 from autograder.runners.jobs import DaskSpec
 from autograder.service import auth
@@ -35,29 +37,47 @@ def open_course(course_path: str | Path, *, database: str | None = None) -> Cour
     return course
 
 
-def import_roster(course: Course, roster: Path, *, tokens_out: Path | None = None) -> tuple[int, Path | None]:
-    """Import ``roster`` into the course database; write new users' tokens to a CSV (mode 0600).
+@dataclass(frozen=True)
+class RosterImport:
+    """What ``autograder roster`` did: who was added, who was already there, where the tokens are."""
 
-    Returns the number of roster rows and the tokens file (``None`` when nobody
-    needed a new token).
+    added: tuple[str, ...]
+    already: tuple[str, ...]
+    tokens: Path | None  # the tokens file, when anyone got a new token
+    new_tokens: int
+    kept_tokens: int  # rows of the earlier tokens file kept beside the new ones
+
+
+def import_roster(course: Course, roster: Path, *, tokens_out: Path | None = None) -> RosterImport:
+    """Import ``roster`` into the course database; add new people's tokens to a CSV (mode 0600).
+
+    The tokens file keeps every row it had whose token still opens the service,
+    so importing a second roster never drops the tokens of the first.
     """
     engine = make_engine(course.database_url)
     try:
         upgrade(engine)
         entries = auth.read_roster(roster)
-        with sessions(engine).begin() as session:
-            issued = auth.import_roster(session, entries)
-            text = auth.tokens_csv(issued)
-        if not issued:
-            return len(entries), None
         out = tokens_out or course.data_dir / "tokens.csv"
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(out, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-        return len(entries), out
+        with sessions(engine).begin() as session:
+            changes = auth.import_roster(session, entries)
+            if not changes.issued:
+                return RosterImport(changes.added, changes.already, None, 0, 0)
+            kept = auth.kept_tokens(session, _read_text(out), besides=(u.id for u, _ in changes.issued))
+            atomic_write_bytes(out, auth.tokens_csv([*kept, *changes.issued]).encode(), mode=0o600)
+        return RosterImport(changes.added, changes.already, out, len(changes.issued), len(kept))
     finally:
         engine.dispose()
+
+
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return ""
+    except OSError as exc:
+        raise UsageError(f"Cannot read the tokens file {str(path)!r} to add to it: {exc.strerror}; "
+                         "nothing was changed.") from None
 
 
 def _secret(course: Course) -> bytes:
@@ -98,10 +118,10 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
     with factory() as session:
         empty = session.scalar(select(func.count()).select_from(User)) == 0
     if empty and course.roster is not None:
-        count, tokens = import_roster(course, course.roster)
+        done = import_roster(course, course.roster)
         if say:
-            print(f"Imported {count} people from {course.roster}; their access tokens are in "
-                  f"{tokens} (only there: the database keeps hashes).", flush=True)
+            print(f"Imported {len(done.added)} people from {course.roster}; their access tokens "
+                  f"are in {done.tokens} (only there: the database keeps hashes).", flush=True)
     settings = GraderSettings(course_path=str(course.path), database_url=course.database_url,
                               dask=spec, **({"lease_seconds": lease_seconds} if lease_seconds else {}))
     pool = GradingPool(settings, 1 if spec is not None else jobs or max(1, (os.cpu_count() or 2)))

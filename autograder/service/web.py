@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import hmac
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Callable
@@ -27,7 +28,8 @@ from starlette.concurrency import run_in_threadpool
 
 from autograder.errors import UploadRejected
 from autograder.results.feedback import FEEDBACK_NAME
-from autograder.service import auth
+from autograder.service import auth, throttle
+from autograder.service.bounds import RequestTooLarge
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
 from autograder.service.storage import Storage
@@ -81,19 +83,45 @@ class Service:
         return hmac.new(self.secret, f"csrf:{user_id}".encode(), hashlib.sha256).hexdigest()
 
     def who(self, request: Request) -> Who | None:
+        """The request's user (looked up once per request); 429 while its address is throttled."""
+        cached = getattr(request.state, "who", _UNKNOWN)
+        if cached is _UNKNOWN:
+            cached = self._who(request)
+            request.state.who = cached
+        return cached
+
+    def _who(self, request: Request) -> Who | None:
+        header = self.course.trusted_header
+        client = request.client.host if request.client else ""
+        bearer = request.headers.get("authorization", "")
         with self.factory() as session:
-            header = self.course.trusted_header
-            client = request.client.host if request.client else ""
             if header and client in self.course.trusted_proxies and request.headers.get(header):
                 user = session.get(User, request.headers[header].strip())
                 return None if user is None else Who(user.id, user.role,
                                                       self.proxy_csrf(user.id), "proxy")
-            bearer = request.headers.get("authorization", "")
-            if bearer.lower().startswith("bearer "):
-                user = auth.user_for_token(session, bearer[7:].strip())
-                return None if user is None else Who(user.id, user.role, "", "bearer")
-            signed = auth.find_session(session, request.cookies.get(SESSION_COOKIE))
-            return None if signed is None else Who(signed.user_id, signed.role, signed.csrf, "cookie")
+            if not bearer.lower().startswith("bearer "):
+                signed = auth.find_session(session, request.cookies.get(SESSION_COOKIE),
+                                           lifetime=self.course.session_lifetime)
+                return None if signed is None else Who(signed.user_id, signed.role, signed.csrf,
+                                                       "cookie")
+            address = client_address(request)
+            wait = throttle.wait_seconds(session, address)
+            if wait:
+                raise TooManyWrongTokens(wait)
+            user = auth.user_for_token(session, bearer[7:].strip())
+            if user is not None:
+                return Who(user.id, user.role, "", "bearer")
+        self.wrong_token(address)  # its own transaction, after this one (SQLite: one writer)
+        return None
+
+    def wrong_token(self, address: str) -> int:
+        """Count a wrong access token from ``address``; the seconds it must now wait."""
+        with self.factory.begin() as session:
+            return throttle.record_failure(session, address)
+
+    def sign_in_wait(self, address: str) -> int:
+        with self.factory() as session:
+            return throttle.wait_seconds(session, address)
 
     def policy(self, name: str) -> AssignmentPolicy:
         policy = self.course.assignment(name)
@@ -118,6 +146,28 @@ class Service:
 
 class NeedSignIn(Exception):
     pass
+
+
+class TooManyWrongTokens(HTTPException):
+    """The client's address tried too many wrong access tokens; it waits ``seconds``."""
+
+    def __init__(self, seconds: int) -> None:
+        self.seconds = seconds
+        super().__init__(429, wait_message(seconds), headers={"Retry-After": str(seconds)})
+
+
+def wait_message(seconds: int) -> str:
+    return ("Too many wrong access tokens were tried from your network, so signing in from it "
+            f"is paused. Try again in {math.ceil(seconds / 60)} minute(s), with the token your "
+            "instructor sent you.")
+
+
+def client_address(request: Request) -> str:
+    """The throttled unit of the request's client (see :func:`throttle.client_key`)."""
+    return throttle.client_key(request.client.host if request.client else None)
+
+
+_UNKNOWN = object()
 
 
 # -- dependencies: the course and the signed-in user ----------------------------------
@@ -208,13 +258,14 @@ def wants_json(request: Request, who: Who | None) -> bool:
 
 
 async def upload_form(request: Request, svc: Service) -> Any:
-    """The form of an upload, refused before it is read when it is announced too large."""
-    limit = svc.course.max_upload_bytes + 256 * 1024
-    length = request.headers.get("content-length")
-    if length is not None and length.isdigit() and int(length) > limit:
-        raise UploadRejected(f"The upload is larger than {svc.course.max_upload_bytes / 1e6:.1f} MB; "
-                             "nothing was stored.", status=413)
-    return await request.form(max_files=1, max_fields=20)
+    """The form of an upload; :class:`~autograder.service.bounds.BodyLimit` stops it at its limit."""
+    try:
+        return await request.form(max_files=1, max_fields=20, max_part_size=8 * 1024)
+    except RequestTooLarge as exc:
+        raise UploadRejected(f"The upload is larger than uploads may be: at most "
+                             f"{svc.course.max_upload_bytes / 1e6:.1f} MB; nothing was stored. "
+                             "Clear the notebook's outputs (Kernel > Restart & Clear Output) and "
+                             "upload it again.", status=exc.status_code) from None
 
 
 def check_csrf(who: Who, form: Any, request: Request) -> None:
@@ -266,8 +317,14 @@ async def need_sign_in(request: Request, exc: NeedSignIn) -> Response:
 
 
 async def http_error(request: Request, exc: HTTPException) -> Response:
+    headers = getattr(exc, "headers", None) or {}
     if _json_error(request):
-        return JSONResponse({"error": exc.detail}, status_code=exc.status_code)
+        return JSONResponse({"error": exc.detail}, status_code=exc.status_code, headers=headers)
     svc: Service = request.app.state.service
-    who = await run_in_threadpool(svc.who, request)
-    return svc.page("error.html.j2", who, status=exc.status_code, message=exc.detail)
+    try:
+        who = await run_in_threadpool(svc.who, request)
+    except HTTPException:  # a throttled address: the page is shown signed out
+        who = None
+    response = svc.page("error.html.j2", who, status=exc.status_code, message=exc.detail)
+    response.headers.update(headers)
+    return response

@@ -45,6 +45,12 @@ from matplotlib.colors import to_hex  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.path import Path  # noqa: E402
 
+from autograder.boundary.figurelimits import (  # noqa: E402
+    MAX_FIGURE_POINTS,
+    MAX_PNG_PIXELS,
+    MAX_TEXT_CHARS,
+)
+
 __all__ = [
     "figure_to_data",
     "open_figures_data",
@@ -54,9 +60,9 @@ __all__ = [
 ]
 
 DEFAULT_DPI = 72
-DEFAULT_MAX_POINTS = 200_000
-#: Largest PNG in pixels; a bigger figure is rendered at a lower dpi.
-MAX_PNG_PIXELS = 4_000_000
+#: the budget of :mod:`autograder.boundary.figurelimits`, which the grader enforces again
+#: on what it receives (this side runs the student's code: its limits are only a courtesy)
+DEFAULT_MAX_POINTS = MAX_FIGURE_POINTS
 
 _SKIP_CODES = (Path.STOP, Path.CLOSEPOLY)
 _IDENTITY = object()  # marks "already in data coordinates"
@@ -351,7 +357,7 @@ def _png(fig: Figure, dpi: float) -> bytes:
 
 
 def _text(value: Any) -> str:
-    return value if type(value) is str else str(value)
+    return (value if type(value) is str else str(value))[:MAX_TEXT_CHARS]
 
 
 def _describe(exc: BaseException) -> str:

@@ -14,11 +14,10 @@ import pytest
 
 from autograder.engine import callbacks
 from autograder.engine.callbacks import traced
-from autograder.engine.proxy import CallLog, Student, StudentFunction
+from autograder.engine.proxy import Student, StudentFunction
 from autograder.engine.slot import GradingSlot
-from autograder.engine.student_process import StudentProcess
 from autograder.errors import CallTimeout, StudentException, UsageError
-from autograder.sandbox.policy import IsolationPolicy
+from tests.support.students import running
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="the worker needs Linux (fork)")
 
@@ -87,12 +86,8 @@ def slot() -> Iterator[GradingSlot]:
 
 @pytest.fixture
 def student(slot: GradingSlot) -> Iterator[Student]:
-    session = StudentProcess(slot=slot, cells=[(0, NOTEBOOK)], data_files=[],
-                             policy=IsolationPolicy(), notebook_timeout=60)
-    report = session.start()
-    assert all(cell.ok for cell in report.cells), report.cells
-    yield Student(session, timeout=5, functions=report.functions, forbidden={}, log=CallLog())
-    session.close()
+    with running(slot, NOTEBOOK, timeout=5) as proxy:
+        yield proxy
 
 
 def test_numpy_ufunc_hidden_lambda_and_list_of_functions(student: Student) -> None:
@@ -206,11 +201,16 @@ def test_evaluation_points_of_vectorised_calls(student: Student) -> None:
     assert f.calls == 0 and f.points.size == 0
 
 
-def test_a_bug_in_the_checks_function_is_the_checks_error_not_the_students(
+def test_any_exception_of_the_checks_function_is_the_students_and_noted_for_the_instructor(
         student: Student) -> None:
     def buggy(x):
         return undefined_name * x  # type: ignore[name-defined]  # noqa: F821
 
-    with pytest.raises(NameError):
-        student.apply(buggy, 1.0)
+    f = traced(buggy)
+    # the student's arguments could have caused it: never the check's fault, never an engine
+    # error; an unusual type may be the check's own bug, so the instructor's log says so
+    with pytest.raises(StudentException, match="`f` raised NameError when called with 1.0"):
+        student.apply(f, 1.0)
+    assert student._log.notes and "NameError" in student._log.notes[-1]
+    assert f.errors and f.errors[0].startswith("NameError")
     assert student.apply(np.exp, 0.0) == 1.0

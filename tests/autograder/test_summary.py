@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from autograder.engine.assignment import load_assignment
-from autograder.engine.grader import GradingOptions, _file_sha256, submission_key
+from autograder.engine.grader import GradingOptions, submission_key
+from autograder.engine.submission import file_sha256 as _file_sha256
 from autograder.results.model import CheckResult, SubmissionResult
 from autograder.results.store import write_result
 from autograder.results.summary import (

@@ -1,0 +1,45 @@
+"""Another assignment's notebook uploaded to hull: refused with whose notebook it is, nothing stored."""
+
+from __future__ import annotations
+
+import httpx
+import pytest
+import svc_support as support
+from conftest import Running
+from sqlalchemy import text
+from test_flows import sign_in
+
+CAR = (support.ROOT / "assignments" / "spline_car" / "examples" / "solution.ipynb").read_bytes()
+WORDS = "this is the spline_car notebook, not hull"
+
+
+def stored(service: Running) -> tuple[int, int]:
+    """(submissions in the database, files in the upload store)."""
+    with service.engine.connect() as db:
+        count = db.execute(text("SELECT count(*) FROM submissions")).scalar_one()
+    uploads = service.data / "uploads"
+    return count, sum(1 for p in uploads.rglob("*") if p.is_file()) if uploads.exists() else 0
+
+
+def test_the_car_notebook_is_refused_over_http(service: Running) -> None:
+    before = stored(service)
+    with httpx.Client(timeout=60) as client:
+        answer = support.upload(client, service.url, service.tokens["carol"], "hull", CAR)
+    assert answer.status_code == 422, answer.text
+    assert WORDS in answer.json()["error"].lower() and "Nothing was stored" in answer.json()["error"]
+    assert stored(service) == before
+
+
+@pytest.mark.browser
+def test_the_car_notebook_is_refused_in_the_browser(service: Running, browser: support.WebDriver,
+                                                     tmp_path) -> None:
+    before = stored(service)
+    sign_in(browser, service.url, service.tokens["carol"])
+    browser.open(f"{service.url}/assignments/hull")
+    notebook = tmp_path / "hull.ipynb"  # named as hull's: the cells say whose it is
+    notebook.write_bytes(CAR)
+    browser.type("#notebook", str(notebook))
+    browser.click("#submit")
+    browser.wait_for("return document.getElementById('upload-error') !== null", timeout=60)
+    assert WORDS in browser.text("#upload-error").lower()
+    assert stored(service) == before
