@@ -9,6 +9,7 @@ create it once and every forked child inherits it ready to use.
 from __future__ import annotations
 
 import io
+import os
 import sys
 import time
 import warnings
@@ -141,9 +142,16 @@ class Execution:
     outcomes: list[CellOutcome] = field(default_factory=list)
 
     def run(self, cells: list[tuple[int, str]], before_cell: Callable[[int], None]) -> None:
+        pid = os.getpid()
         for index, source in cells:
+            if os.getpid() != pid:
+                # A child a cell forked, unwound back to here (its setsid() refused, say):
+                # it must not run the next cells beside its parent, nor report them.
+                os._exit(0)
             before_cell(index)
             self.outcomes.append(self._run_one(index, source))
+        if os.getpid() != pid:
+            os._exit(0)
 
     def _run_one(self, index: int, source: str) -> CellOutcome:
         self.shell.last_traceback = ""
