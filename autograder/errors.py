@@ -21,6 +21,7 @@ __all__ = [
     "CallTimeout",
     "UnsupportedValue",
     "WorkerCrashed",
+    "ProtocolViolation",
     "NotRun",
     "ForbiddenUse",
     "EngineError",
@@ -92,6 +93,11 @@ class UnsupportedValue(StudentError, TypeError):
 
 class WorkerCrashed(StudentError):
     """The worker process died (killed by a limit, exited, or crashed)."""
+
+
+class ProtocolViolation(WorkerCrashed):
+    """The student's code wrote to the grader's connection: a frame the protocol does not
+    expect there. The worker is stopped, as if it had crashed; never an engine error."""
 
 
 class NotRun(StudentError):

@@ -27,7 +27,7 @@ import json
 import socket
 import struct
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from autograder.boundary.codec import (
@@ -44,7 +44,11 @@ from autograder.boundary.codec import (
 from autograder.boundary.limits import BUFFER_PREFIX, MAX_DEPTH, MAX_FRAME_BYTES, MAX_ITEMS
 from autograder.errors import ProtocolError
 
-__all__ = ["send_frame", "recv_frame", "send_message", "recv_message"]
+__all__ = ["send_frame", "recv_frame", "send_message", "recv_message", "Waiter"]
+
+#: called when the peer's side is full: returns once ``sock`` is writable again, or
+#: raises ``TimeoutError`` (the sender's deadline); see :func:`send_frame`
+Waiter = Callable[[socket.socket], None]
 
 _JSON_INT_CHARS = 320  # a 1024-bit int has 309 digits; longer JSON numbers are rejected
 _COALESCE_BYTES = 64 * 1024
@@ -57,12 +61,16 @@ def send_frame(
     buffers: Sequence[Buffer],
     *,
     max_bytes: int = MAX_FRAME_BYTES,
+    wait: Waiter | None = None,
 ) -> int:
     """Send one frame holding ``tree`` and ``buffers``; return its size in bytes.
 
     Raises :class:`ProtocolError` before sending anything if the tree is not
     plain JSON or the frame would exceed ``max_bytes``; socket errors
     (``OSError``, ``TimeoutError`` from the socket's own timeout) propagate.
+    With ``wait``, no send blocks: each is tried at once, and while the peer does
+    not read, ``wait`` decides how long to wait for room (and raises
+    ``TimeoutError`` to give up; the stream is then out of step).
     """
     lengths = [nbytes(b) for b in buffers]
     try:
@@ -80,12 +88,26 @@ def send_frame(
         if n <= _COALESCE_BYTES:
             pending += data
         else:
-            sock.sendall(pending)
+            _send_all(sock, pending, wait)
             pending = bytearray()
-            sock.sendall(data)
+            _send_all(sock, data, wait)
     if pending:
-        sock.sendall(pending)
+        _send_all(sock, pending, wait)
     return total
+
+
+def _send_all(sock: socket.socket, data: Buffer, wait: Waiter | None) -> None:
+    """``sock.sendall(data)``, or with ``wait``: sends that never block, ``wait`` in between."""
+    if wait is None:
+        sock.sendall(data)
+        return
+    view = memoryview(data).cast("B")
+    sent = 0
+    while sent < len(view):
+        try:
+            sent += sock.send(view[sent:], socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            wait(sock)
 
 
 def recv_frame(
@@ -142,18 +164,19 @@ def send_message(
     max_items: int = MAX_ITEMS,
     max_bytes: int = MAX_FRAME_BYTES,
     callable_encoder: CallableEncoder | None = None,
+    wait: Waiter | None = None,
 ) -> int:
     """Encode ``obj`` (see :func:`~autograder.boundary.codec.encode`) and send it as one frame;
     return the frame size.
 
     Raises :class:`ProtocolError` before sending anything if ``obj`` is over a
-    limit.
+    limit. ``wait``: see :func:`send_frame`.
     """
     tree, buffers = encode(
         obj, max_depth=max_depth, max_items=max_items, figure_encoder=figure_encoder,
         callable_encoder=callable_encoder,
     )
-    return send_frame(sock, tree, buffers, max_bytes=max_bytes)
+    return send_frame(sock, tree, buffers, max_bytes=max_bytes, wait=wait)
 
 
 def recv_message(

@@ -114,7 +114,7 @@ def run(source, hidden, namespace):
             if last is not None:
                 value = eval(compile(last, "<test cell>", "eval"), namespace)
     finally:
-        if True:
+        if not hidden:
             sys.stdout.write(out.getvalue())
             sys.stdout.write(err.getvalue())
     if err.getvalue():

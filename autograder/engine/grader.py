@@ -45,7 +45,12 @@ from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
 from autograder.engine.otter_format import checker_tests, is_otter_notebook, read_otter
 from autograder.engine.requirements import check_requirements
-from autograder.engine.student_process import NotebookRun, StudentProcess
+from autograder.engine.student_process import (
+    NotebookRun,
+    StudentProcess,
+    check_cell_count,
+    wall_limit,
+)
 from autograder.engine.submission import (
     Submission,
     file_sha256,
@@ -341,6 +346,7 @@ class Grader:
         try:
             _require_regular_file(path)
             notebook = read_notebook(path, max_bytes=self.options.max_notebook_bytes)
+            check_cell_count(len(notebook.cells))
         except NotebookError as exc:
             return None, str(exc)
         if name == self.assignment.notebooks[0].name:  # which assignment: from the first
@@ -389,6 +395,7 @@ class Grader:
                                           digest) if runs_checks else ())
             finally:
                 session.close()
+        run = session.report or run  # as it stands after the calls (a protocol violation)
         cell_tests = score_cell_tests(
             placed, [CellReport(c.index, c.ok, c.ename, c.evalue, c.traceback) for c in run.cells],
             timed_out=run.timed_out_cells, crashed=run.crashed_cells)
@@ -411,9 +418,7 @@ class Grader:
 
     def _session(self, placed: PlacedTests, out_dir: Path | None) -> StudentProcess:
         """A fresh sandboxed process for one notebook's cells."""
-        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
-        call_timeout = self.options.call_timeout or self.assignment.call_timeout
-        budget = self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+        notebook_timeout, budget = self._budgets()
         # RLIMIT_CPU is the kernel's last word on one process: never below the budget the
         # engine itself enforces, so an honest slow submission meets the engine's message.
         limits = self.policy.limits
@@ -424,6 +429,17 @@ class Grader:
             data_files=self._data_files(), policy=policy,
             notebook_timeout=notebook_timeout, exclude=self._excluded_paths(out_dir),
             cpu_budget=budget, forbid=self.assignment.rules.to_wire(), otter=self._otter)
+
+    def _budgets(self) -> tuple[float, float]:
+        """The notebook's CPU time limit and the whole submission's CPU budget, in seconds."""
+        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
+        call_timeout = self.options.call_timeout or self.assignment.call_timeout
+        return notebook_timeout, self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+
+    def wall_limit(self) -> float:
+        """The most wall-clock seconds the student's code of one submission can hold the grader
+        (see :func:`autograder.engine.student_process.wall_limit`)."""
+        return wall_limit(*self._budgets())
 
     def _run_checks(self, target: Any, functions: Sequence[str], forbidden: dict[str, str],
                     seed: int, out_dir: Path | None, digest: str) -> tuple[CheckResult, ...]:
@@ -501,6 +517,8 @@ def summarise_run(run: NotebookRun, notebook: Notebook) -> str:
     if errors:
         listed = "; ".join(f"cell {c.index + 1} ({c.ename}: {c.evalue[:120]})" for c in errors[:5])
         parts.append(f"{len(errors)} cell(s) raised an error: {listed}.")
+    if run.violation:
+        parts.append(f"{run.violation}.")
     if run.crashed:
         parts.append("The worker running your notebook stopped (it exited, or hit a memory "
                      "or CPU limit); checks that needed it were scored zero.")

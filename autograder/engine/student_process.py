@@ -4,33 +4,47 @@ A :class:`StudentProcess` asks a :class:`~autograder.engine.slot.GradingSlot` fo
 fresh sandboxed child per submission, waits for the notebook to run, and then sends
 calls with a time limit each. The grader kills the child's whole process group on
 any timeout (see :mod:`autograder.sandbox.reaper`); it never waits on student code
-without a deadline.
+without a deadline, whether it reads from the child or writes to it (a child that
+never reads fills the socket: every send waits under the same CPU limit and
+wall-clock backstop as a receive).
+
+The child is untrusted, so the grader holds it to the protocol: at each point only
+the frame the protocol allows there is accepted (``started`` or ``sandbox-broken``
+first, then ``cell`` announcements in order and ``ready``; after a request, its
+answer or a callback request, sent only once the child has read everything the
+grader sent). Anything else is the student's :class:`~autograder.errors.ProtocolViolation`:
+the worker is stopped as if it had crashed, and the rules for a crashed worker apply.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import select
 import shutil
 import socket
 import tempfile
+import termios
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from autograder.boundary import frames, values
+from autograder.boundary.limits import MAX_CELLS
 from autograder.engine.slot import GradingSlot
 from autograder.errors import (
     CallTimeout,
     EngineError,
     ForbiddenUse,
     MissingFunction,
+    NotebookError,
     NotRun,
     ProtocolError,
+    ProtocolViolation,
     StudentError,
     StudentException,
     UnsupportedValue,
@@ -60,6 +74,17 @@ _CORES = os.cpu_count() or 1
 def wall_backstop(cpu_limit: float) -> float:
     """Wall-clock seconds after which code that is not computing is stopped."""
     return WALL_FACTOR * cpu_limit + WALL_SLACK
+
+
+def wall_limit(notebook_timeout: float, cpu_budget: float) -> float:
+    """The most wall-clock seconds one submission's worker can take, every backstop reached.
+
+    The notebook runs up to ``MAX_RESTARTS + 1`` times before the first call; calls
+    start until the submission's wall budget (``wall_backstop(cpu_budget)`` since the
+    start) is spent, and the last one may take as long again, a restart of the
+    notebook included. What the checks do on the trusted side comes on top.
+    """
+    return (MAX_RESTARTS + 2) * wall_backstop(notebook_timeout) + 2 * wall_backstop(cpu_budget)
 
 
 def payload_size(value: Any, _depth: int = 0) -> int:
@@ -100,6 +125,8 @@ class NotebookRun:
     crashed: bool = False
     notes: tuple[str, ...] = ()
     cpu_seconds: float = 0.0
+    #: what the student's code wrote to the grader's connection, if it did (see ProtocolViolation)
+    violation: str = ""
     #: the index of the first hidden test cell whose source the worker was given: the
     #: cells from it on ran where student code could have read a hidden test, so their
     #: output is not in ``stdout`` and their reports are for scoring only (None: no
@@ -111,6 +138,34 @@ class NotebookRun:
 OUTPUT_CAP = 1 << 20
 #: the most cell reports kept (each holds at most a 20,000-character traceback)
 MAX_CELL_REPORTS = 200
+
+
+def check_cell_count(count: int) -> None:
+    """Refuse a notebook of more than :data:`~autograder.boundary.limits.MAX_CELLS` code cells.
+
+    Raises :class:`~autograder.errors.NotebookError` (``kind="too-many-cells"``): the
+    notebook is not run at all, and the message says so.
+    """
+    if count > MAX_CELLS:
+        raise NotebookError(
+            f"it has {count:,} code cells, and the grader runs notebooks of at most "
+            f"{MAX_CELLS:,}. None of its code was run. Merge cells (or remove empty and "
+            "generated ones) and submit again.", kind="too-many-cells")
+
+
+class _Violation(Exception):
+    """A frame the protocol does not allow at this point (raised inside this module only)."""
+
+
+def _unread_bytes(sock: socket.socket) -> int:
+    """Bytes the grader sent that the child has not read yet (SIOCOUTQ of a UNIX socket)."""
+    raw = fcntl.ioctl(sock.fileno(), termios.TIOCOUTQ, b"\0\0\0\0")
+    return int.from_bytes(raw, "little", signed=True)
+
+
+def _is_answer(message: Any) -> bool:
+    """The answer to a request: a dict with "ok" and no "op" (see autograder.worker.loop)."""
+    return isinstance(message, dict) and "op" not in message and "ok" in message
 
 
 def _cell_report(data: Any) -> CellRun:
@@ -158,6 +213,8 @@ class StudentProcess:
     #: the check being run, for "not run, because ... on <check>" messages
     current_check: str = ""
     cpu_seconds: float = 0.0
+    #: the last protocol violation of the student's code, said again to every later call
+    violation: str = ""
     _pid: int | None = None
     #: names the child itself; every signal to it goes through this (see kill_child)
     _pidfd: int | None = None
@@ -184,9 +241,7 @@ class StudentProcess:
             if status == "ready":
                 cells, stdout, functions = payload
                 break
-            # A cell skipped already cannot stop a run unless the student's code named it
-            # (a forged "cell" frame): giving up then keeps the restarts finite.
-            if cell is None or cell in self.skip or len(self.skip) >= MAX_RESTARTS + 1:
+            if cell is None or len(self.skip) >= MAX_RESTARTS + 1:
                 self._kill()
                 self._pid = None
                 if cell is not None:
@@ -205,7 +260,7 @@ class StudentProcess:
             timed_out_cells=tuple(sorted(i for i, s in self.skip.items() if s == "timeout")),
             crashed_cells=tuple(sorted(i for i, s in self.skip.items() if s == "crash")),
             crashed=self._pid is None, notes=tuple(notes), cpu_seconds=self.cpu_seconds,
-            hidden_from=hidden_from)
+            violation=self.violation, hidden_from=hidden_from)
         return self.report
 
     def _run_once(self, notes: list[str]) -> tuple[str, int | None, Any]:
@@ -213,6 +268,9 @@ class StudentProcess:
         self._spawn()
         started = False
         current: int | None = None
+        #: the cells the child runs, in order: it announces each before running it
+        order = [i for i, _ in self.cells if i not in self.skip]
+        announced = 0
         assert self._clock is not None
         self._clock.start()
         spent: float | None = None
@@ -232,65 +290,97 @@ class StudentProcess:
                             "the sandboxed worker stopped before running any cell "
                             f"({type(exc).__name__}); see the grader's log") from None
                     return "crash", current, None
-                if not isinstance(message, dict):
+                if not started:
+                    self._set_up(message, notes)
+                    started = True
                     continue
-                try:  # the child is untrusted: a malformed message counts as a crash
-                    op = message.get("op")
-                    if op == "sandbox-broken":
-                        self._kill()
-                        raise EngineError(
-                            "the sandbox is incomplete: the worker cannot read "
-                            f"{str(message.get('path', '?'))[:300]} "
-                            f"({str(message.get('error', ''))[:200]}). Grading stopped, so no "
-                            "student gets a wrong zero; report this with the grader's "
-                            "install layout (where Python and its packages live).")
-                    if op == "started":
-                        started = True
-                        notes[:] = [str(n)[:500] for n in message.get("notes", [])][:64]
-                    elif op == "cell":
-                        current = int(message["index"])
-                    elif op == "need-source" and not self._give_source(message, current,
-                                                                        wall_deadline):
-                        self._kill()  # not the worker's request: the student's code speaking
-                        return "crash", current, None
+                try:  # from here on the child runs student code: it is held to the protocol
+                    op = message.get("op") if isinstance(message, dict) else None
+                    if op == "cell":
+                        if announced >= len(order) or message.get("index") != order[announced]:
+                            raise _Violation(f"it announced cell {_shown(message.get('index'))} "
+                                             "out of turn")
+                        current, announced = order[announced], announced + 1
+                    elif op == "need-source":
+                        self._give_source(message, current, wall_deadline)
                     elif op == "ready":
+                        if announced != len(order):
+                            raise _Violation("it reported the notebook finished before its "
+                                             "last cell ran")
                         reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
                         return "ready", None, (reports,
                                                str(message.get("stdout", ""))[:OUTPUT_CAP],
                                                [str(f)[:200] for f in message.get("functions", [])])
-                except (KeyError, TypeError, ValueError, OSError, ProtocolError):
+                    else:
+                        raise _Violation(f"it sent {_describe(message)} while the notebook ran")
+                except (KeyError, TypeError, ValueError):  # a malformed "ready"
+                    self._violated(f"cell {_shown(current)}", "it sent a malformed report")
+                    return "crash", current, None
+                except _Violation as exc:
+                    self._violated(f"cell {_shown(current)}", str(exc))
+                    return "crash", current, None
+                except TimeoutError:  # it did not read the source it asked for
+                    spent = self._clock.used()
+                    self._kill()
+                    return "timeout", current, None
+                except OSError:
                     self._kill()
                     return "crash", current, None
         finally:
             self.cpu_seconds += spent if spent is not None else self._clock.own()
 
     def _give_source(self, message: dict[str, Any], current: int | None,
-                     wall_deadline: float) -> bool:
-        """Send the source of the hidden test cell the worker has reached; False if the
-        request breaks the protocol (then it came from the student's code).
+                     wall_deadline: float) -> None:
+        """Send the source of the hidden test cell the worker has reached.
 
         Answered only for the next hidden test cell of this run, in running order and
-        once each, and only for the cell the worker announced. The first answer also
-        fixes what the feedback may show: the reports and output that came with the
-        request, from before any hidden test was in the process.
+        once each, and only for the cell the worker announced; any other request is
+        the student's code speaking for the worker (:class:`_Violation`). The first
+        answer also fixes what the feedback may show: the reports and output sent with
+        the request, from before any hidden test was in the process.
         """
-        index = int(message["index"])
+        index = message.get("index")
         if not self._pending or index != self._pending[0] or index != current:
-            return False
+            raise _Violation(f"it asked for the source of cell {_shown(index)}, which is "
+                             "not the hidden test cell it is at")
         if self._before is None:
             reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
             self._before = (index, reports, str(message["stdout"])[:OUTPUT_CAP])
         self._pending.pop(0)
-        assert self._sock is not None
-        # Bounded: a child that stopped reading must not hold the grader past its backstop.
-        previous = self._sock.gettimeout()
-        self._sock.settimeout(max(1.0, wall_deadline - time.monotonic()))
-        try:
-            frames.send_message(self._sock, {"op": "source", "index": index,
-                                             "source": self.hidden_sources[index]})
-        finally:
-            self._sock.settimeout(previous)
-        return True
+        self._send({"op": "source", "index": index, "source": self.hidden_sources[index]},
+                   self.notebook_timeout, wall_deadline)
+
+    def _set_up(self, message: Any, notes: list[str]) -> None:
+        """The child's first frame, sent before any student code ran: ``started``, or the
+        sandbox's own finding that a file student code needs is unreadable.
+
+        Only here is ``sandbox-broken`` believed: the child has run nothing of the
+        student's yet. Later, the same frame is the student's protocol violation.
+        """
+        op = message.get("op") if isinstance(message, dict) else None
+        if op == "started":
+            listed = message.get("notes", [])
+            notes[:] = [str(n)[:500] for n in (listed if isinstance(listed, list) else [])][:64]
+            return
+        self._kill()
+        if op == "sandbox-broken":
+            raise EngineError(
+                "the sandbox is incomplete: the worker cannot read "
+                f"{str(message.get('path', '?'))[:300]} "
+                f"({str(message.get('error', ''))[:200]}). Grading stopped, so no "
+                "student gets a wrong zero; report this with the grader's "
+                "install layout (where Python and its packages live).")
+        raise EngineError(f"the sandboxed worker sent {_describe(message)} before starting; "
+                          "see the grader's log")
+
+    def _violated(self, where: str, detail: str) -> None:
+        """Stop the child for a protocol violation at ``where`` and remember it."""
+        self._kill()
+        self.violation = (f"{where} broke the grader's protocol: {detail}. Your code must not "
+                          "read or write the worker's connection to the grader (a file "
+                          "descriptor of the process), so the worker was stopped")
+        if self.report is not None:  # a call's violation: the run's report says it too
+            self.report = replace(self.report, violation=self.violation)
 
     def _spawn(self) -> None:
         self._kill()
@@ -327,6 +417,30 @@ class StudentProcess:
         (since the clock's start) or the wall-clock backstop passed."""
         if self._sock is None or self._clock is None:
             raise EOFError("no worker")
+        wall_left = self._wait_for(self._sock, cpu_limit, wall_deadline, write=False)
+        # A frame has started: the child may still stall inside it, so the
+        # wall-clock backstop bounds the rest of the read.
+        return frames.recv_message(self._sock, timeout=max(wall_left, 1.0))
+
+    def _send(self, message: dict[str, Any], cpu_limit: float, wall_deadline: float) -> None:
+        """Send ``message`` to the child under the same limits as :meth:`_await`.
+
+        A child that does not read fills the socket; the send then waits for room
+        only while the child is within its CPU limit and the wall-clock backstop.
+        """
+        if self._sock is None or self._clock is None:
+            raise EOFError("no worker")
+        frames.send_message(self._sock, message, wait=lambda sock: self._wait_for(
+            sock, cpu_limit, wall_deadline, write=True))
+
+    def _wait_for(self, sock: socket.socket, cpu_limit: float, wall_deadline: float, *,
+                  write: bool) -> float:
+        """Wait until ``sock`` is readable (or writable); return the wall seconds left.
+
+        TimeoutError once the child used ``cpu_limit`` CPU seconds (since the clock's
+        start) or the wall-clock backstop passed.
+        """
+        assert self._clock is not None
         used = 0.0
         while True:
             # CPU time cannot grow faster than wall time times the cores the child may use.
@@ -340,11 +454,10 @@ class StudentProcess:
             if used >= cpu_limit or wall_left <= 0:
                 raise TimeoutError
             wait = min(wall_left, cpu_wait)
-            readable, _, _ = select.select([self._sock], [], [], wait)
-            if readable:
-                # A frame has started: the child may still stall inside it, so the
-                # wall-clock backstop bounds the rest of the read.
-                return frames.recv_message(self._sock, timeout=max(wall_left, 1.0))
+            readable, writable, _ = select.select([] if write else [sock],
+                                                  [sock] if write else [], [], wait)
+            if readable or writable:
+                return wall_left
             used = self._clock.used()
 
     def _kill(self) -> None:
@@ -368,9 +481,9 @@ class StudentProcess:
 
     def close(self) -> None:
         if self._sock is not None:
-            try:
-                frames.send_message(self._sock, {"op": "bye"})
-            except OSError:
+            try:  # never waited for: a child that does not read is killed just below
+                frames.send_message(self._sock, {"op": "bye"}, wait=_give_up)
+            except OSError:  # TimeoutError included
                 pass
         self._kill()
         self._pid = None
@@ -391,37 +504,15 @@ class StudentProcess:
         ``timeout`` is in CPU seconds. Callback requests from the worker (a student
         function calling a function a check passed) are answered in between.
         """
-        if self._wall_budget_spent():
-            raise NotRun(f"{what} was not run: your submission used its whole time budget "
-                         f"({wall_backstop(self.cpu_budget or 0):g} s), mostly waiting rather "
-                         "than computing (sleep, input, locks).")
-        if self._budget_left() <= 0:
-            raise NotRun(f"{what} was not run: your submission used its whole time budget "
-                         f"({self.cpu_budget:g} s of CPU) on earlier cells and calls.")
-        if self._sock is None:
-            if self.report is None or self.report.crashed or self.restarts >= MAX_CALL_RESTARTS:
-                raise WorkerCrashed(
-                    f"{what} could not run: your notebook's worker stopped earlier "
-                    "(a time limit, a memory limit, or code that ended the process).")
-            self.restarts += 1
-            status, _, _ = self._run_once([])
-            if status != "ready":
-                self._kill()
-                raise WorkerCrashed(f"{what} could not run: restarting your notebook failed.")
+        self._ensure_worker(what)
         assert self._sock is not None and self._clock is not None
         limit = min(timeout, self._budget_left())
         spent: float | None = None
         self._clock.start()
         wall_deadline = time.monotonic() + wall_backstop(limit)
         try:
-            frames.send_message(self._sock, message)
-            while True:
-                answer = self._await(limit, wall_deadline)
-                if not (isinstance(answer, dict) and answer.get("op") == "callback"):
-                    break
-                reply = (self.on_callback(answer) if self.on_callback is not None else
-                         {"op": "callback-result", "ok": False, "error": "no callbacks"})
-                frames.send_message(self._sock, reply)
+            self._send(message, limit, wall_deadline)
+            return self._exchange(limit, wall_deadline)
         except TimeoutError:
             used = spent = self._clock.used()
             self._kill()
@@ -432,6 +523,9 @@ class StudentProcess:
             raise CallTimeout(
                 f"{what} did not return within {wall_backstop(limit):g} s although it used "
                 f"only {used:.1f} s of CPU: it was waiting (sleep, input, a lock, a pipe).") from None
+        except _Violation as exc:
+            self._violated(what, str(exc))
+            raise ProtocolViolation(f"{self.violation}.") from None
         except ProtocolError as exc:
             self._kill()
             raise UnsupportedValue(
@@ -444,10 +538,51 @@ class StudentProcess:
                 f"CPU limit, or crashed): {type(exc).__name__}.") from None
         finally:
             self.cpu_seconds += spent if spent is not None else self._clock.own()
-        if not isinstance(answer, dict):
+
+    def _ensure_worker(self, what: str) -> None:
+        """Raise unless the submission may still make a call; restart its worker if needed."""
+        if self._wall_budget_spent():
+            raise NotRun(f"{what} was not run: your submission used its whole time budget "
+                         f"({wall_backstop(self.cpu_budget or 0):g} s), mostly waiting rather "
+                         "than computing (sleep, input, locks).")
+        if self._budget_left() <= 0:
+            raise NotRun(f"{what} was not run: your submission used its whole time budget "
+                         f"({self.cpu_budget:g} s of CPU) on earlier cells and calls.")
+        if self._sock is not None:
+            return
+        if self.report is None or self.report.crashed or self.restarts >= MAX_CALL_RESTARTS:
+            if self.violation:
+                raise ProtocolViolation(f"{what} could not run: {self.violation}.")
+            raise WorkerCrashed(
+                f"{what} could not run: your notebook's worker stopped earlier "
+                "(a time limit, a memory limit, or code that ended the process).")
+        self.restarts += 1
+        status, _, _ = self._run_once([])
+        if status != "ready":
             self._kill()
-            raise WorkerCrashed(f"{what}: the worker sent a malformed answer.")
-        return answer
+            raise WorkerCrashed(f"{what} could not run: restarting your notebook failed.")
+
+    def _exchange(self, limit: float, wall_deadline: float) -> dict[str, Any]:
+        """The answer to the request just sent; the child's callback requests are
+        answered meanwhile. Anything else it sends is a :class:`_Violation`."""
+        assert self._sock is not None
+        while True:
+            message = self._await(limit, wall_deadline)
+            if _unread_bytes(self._sock):
+                # The worker reads all the grader sent before it writes again (a callback
+                # waits for its answer): a frame now was written by the student's code.
+                raise _Violation("it wrote to the grader's connection without reading what "
+                                 "the grader had sent")
+            if _is_answer(message):
+                return message  # type: ignore[no-any-return]
+            if not (isinstance(message, dict) and message.get("op") == "callback"):
+                raise _Violation(f"it sent {_describe(message)} where the grader expected "
+                                 "an answer")
+            reply = (self.on_callback(message) if self.on_callback is not None else
+                     {"op": "callback-result", "ok": False, "error": "no callbacks"})
+            if "tally" in message:  # counts of functions run in the child: not answered
+                continue
+            self._send(reply, limit, wall_deadline)
 
     def call(self, name: str, args: Sequence[Any], kwargs: dict[str, Any], *,
              timeout: float, figures: bool = False) -> tuple[Any, list[Any]]:
@@ -489,6 +624,26 @@ class StudentProcess:
     def figures(self, *, timeout: float) -> list[Any]:
         answer = self.request({"op": "figures"}, timeout=timeout, what="drawing your figures")
         return list(answer.get("value", []))
+
+
+def _give_up(sock: socket.socket) -> None:
+    """A send's wait that does not wait (see :func:`autograder.boundary.frames.send_frame`)."""
+    raise TimeoutError("the worker is not reading")
+
+
+def _shown(value: Any) -> str:
+    """A value from the child, short enough for a message (a cell index counts from 1)."""
+    if type(value) is int:
+        return str(value + 1)
+    return repr(value)[:40] if isinstance(value, (str, float)) else "?"
+
+
+def _describe(message: Any) -> str:
+    """What kind of frame the child sent, for a message."""
+    if isinstance(message, dict):
+        op = message.get("op")
+        return f"a {str(op)[:40]!r} frame" if isinstance(op, str) else "a frame without a known op"
+    return f"a frame holding a {type(message).__name__}"
 
 
 def answer_error(name: str, answer: dict[str, Any]) -> Exception:

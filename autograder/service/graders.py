@@ -4,17 +4,24 @@ Grading is CPU-bound, blocking, and runs pytest in the grading process, so it
 runs in separate processes (never on the web server's event loop or threads).
 Each process keeps one Grader per assignment alive between jobs (rebuilt when
 the assignment's checks change), claims a job, renews the lease from a small
-thread while it grades, and records the result. :mod:`autograder.service.pool`
+thread while it grades, and records the result. The lease is renewed only while the
+submission is within its budget (:meth:`Grader.wall_limit`, with a margin): a grading
+process still busy after that is stuck, so it ends itself, the pool starts another,
+and the job's lease runs out for the next grader (after ``max_tries`` the job fails
+for the instructor), so no single upload holds the queue. :mod:`autograder.service.pool`
 starts these processes and ties their lives to the service's; a job whose
 grading process died has its lease run out, and another grader takes it.
 """
 
 from __future__ import annotations
 
+import logging
 import os
+import signal
 import threading
+import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from autograder.engine.assignment import checks_digest, load_assignment
 from autograder.engine.grader import Grader, GradingOptions, error_result, forget_check_modules
@@ -117,9 +124,40 @@ def load_submission(factory: Any, job: jobqueue.Claimed) -> Submission:
     return submission
 
 
+log = logging.getLogger("autograder.service.graders")
+
+#: a grading may take this much longer than its submission's wall limit (the checks' own
+#: work on the trusted side, collecting them, writing the result), and this factor more
+OVERRUN_SLACK = 300.0
+OVERRUN_FACTOR = 1.5
+
+
+def grading_deadline(graders: _Graders, submission: Submission) -> float | None:
+    """When (``time.monotonic()``) grading ``submission`` is overdue; ``None`` if its
+    assignment cannot be loaded (grading then fails at once, with that message)."""
+    try:
+        limit = graders.get(submission.assignment).wall_limit()
+    except Exception:
+        return None
+    return time.monotonic() + OVERRUN_FACTOR * limit + OVERRUN_SLACK
+
+
+def _replace_this_process() -> None:
+    """End a grading process stuck past its job's deadline; the pool starts a new one."""
+    log.error("grading process %d: a job ran past its whole time budget; this process ends "
+              "and the job's lease runs out for another try", os.getpid())
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
 def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: GraderSettings,
-                stop: threading.Event) -> None:
+                stop: threading.Event, *, deadline: float | None = None,
+                overrun: Callable[[], None] = _replace_this_process) -> None:
+    """Renew ``job``'s lease until ``stop`` is set; past ``deadline``, stop renewing and
+    call ``overrun`` (which ends the stuck grading process)."""
     while not stop.wait(settings.lease_seconds / 3):
+        if deadline is not None and time.monotonic() >= deadline:
+            overrun()
+            return
         if not jobqueue.renew(factory, job, lease_seconds=settings.lease_seconds):
             return
 
@@ -144,6 +182,7 @@ def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int) -> 
             submission = load_submission(factory, job)
             halt = threading.Event()
             keeper = threading.Thread(target=_keep_lease, args=(factory, job, settings, halt),
+                                      kwargs={"deadline": grading_deadline(graders, submission)},
                                       daemon=True)
             keeper.start()
             try:

@@ -121,6 +121,7 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         if shared is not None:  # enforced (and closed) above unless another was needed
             shared.close()
         _die_with_parent()
+        loop.protect_channel(sock)
         gap = _unreadable_path()
         if gap is not None:
             frames.send_message(sock, {"op": "sandbox-broken", "path": gap[0], "error": gap[1]})

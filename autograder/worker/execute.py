@@ -9,6 +9,7 @@ create it once and every forked child inherits it ready to use.
 from __future__ import annotations
 
 import io
+import os
 import sys
 import time
 import warnings
@@ -144,13 +145,20 @@ class Execution:
             fetch_source: Callable[[int], str] | None = None) -> None:
         """Run ``cells``; a cell without source (a hidden test) gets it from ``fetch_source``
         once it is reached."""
+        pid = os.getpid()
         for index, source in cells:
+            if os.getpid() != pid:
+                # A child a cell forked, unwound back to here (its setsid() refused, say):
+                # it must not run the next cells beside its parent, nor report them.
+                os._exit(0)
             before_cell(index)
             if source is None:
                 if fetch_source is None:
                     raise ValueError(f"cell {index} came without its source")
                 source = fetch_source(index)
             self.outcomes.append(self._run_one(index, source))
+        if os.getpid() != pid:
+            os._exit(0)
 
     def _run_one(self, index: int, source: str) -> CellOutcome:
         self.shell.last_traceback = ""

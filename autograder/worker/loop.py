@@ -13,13 +13,19 @@ runs the real function on its side and answers ``{"op": "callback-result",
 ...}``; the function's code never enters this process. A ref with a ``safe``
 name (a pure numpy ufunc from :data:`~autograder.boundary.values.SAFE_FUNCTIONS`) is
 evaluated here instead, and its calls are counted and reported to the grader
-(``{"op": "callback", "tally": [...]}``, acknowledged but not waited for)
-before the call's answer. A stub is
+(``{"op": "callback", "tally": [...]}``, not answered) before the call's answer. A stub is
 valid for the one call it was passed to: used after that call returned, it
 raises :class:`StaleCallback`.
 
 A function the student *returns* is kept in a table here and crosses as a
 ref; the grader calls it with ``{"op": "call-ref", "id", "args", "kwargs"}``.
+
+Forked children
+---------------
+Only the process that serves owns the socket (:func:`protect_channel`): a child the
+student's code forks has it closed at once, and a child that unwinds back into
+:func:`serve` (say, after a refused ``setsid()``) exits there without reading or
+answering, so a parent's verdicts are never answered by its children.
 """
 
 from __future__ import annotations
@@ -187,6 +193,7 @@ class Channel:
         raise _BUILTIN_ERRORS.get(str(reply.get("type")), RuntimeError)(message_text)
 
     def _exchange(self, tree: Any, buffers: list[Any]) -> Any:
+        leave_if_forked()
         try:
             frames.send_frame(self.sock, tree, buffers)
             return frames.recv_message(self.sock)
@@ -199,8 +206,8 @@ class Channel:
         self.in_call, self.limited = False, ""
         self.generation += 1
         if used:
-            # Not waited for: the grader's acknowledgement arrives before its next
-            # request and the serving loop skips it, which saves a round trip per call.
+            leave_if_forked()
+            # Not answered by the grader: this saves a round trip per call.
             tree, buffers = codec.encode({"op": "callback",
                                              "tally": [stub._tally() for stub in used]})
             try:
@@ -284,19 +291,46 @@ def handle(shell: GradingShell, output: BoundedText, request: dict[str, Any],
     return answer
 
 
+#: the pid of the process that serves the grader (set by protect_channel)
+_SERVING: list[int] = []
+
+
+def protect_channel(sock: socket.socket) -> None:
+    """Make ``sock`` this process's alone: closed in every child it forks, never inherited.
+
+    Called once in the sandboxed child before any student code runs. A forked child
+    that reaches the worker's own code anyway (a fork that bypassed Python's hooks)
+    is stopped by :func:`owns_channel`.
+    """
+    _SERVING[:] = [os.getpid()]
+    sock.set_inheritable(False)  # close-on-exec: no program the student runs gets it
+    os.register_at_fork(after_in_child=sock.close)
+
+
+def owns_channel() -> bool:
+    """Whether this process is the one that serves the grader (see :func:`protect_channel`)."""
+    return not _SERVING or _SERVING[0] == os.getpid()
+
+
+def leave_if_forked() -> None:
+    """End this process at once if it is a child the student's code forked."""
+    if not owns_channel():
+        os._exit(0)
+
+
 def serve(sock: socket.socket, shell: GradingShell, output: BoundedText) -> None:
     """Answer requests until the grader says goodbye or goes away."""
     channel = Channel(sock)
     while True:
+        leave_if_forked()
         try:
             request = frames.recv_message(sock)
         except (EOFError, OSError, ProtocolError):
             return
         if not isinstance(request, dict) or request.get("op") == "bye":
             return
-        if request.get("op") == "callback-result":  # the acknowledgement of a tally
-            continue
         answer = handle(shell, output, request, channel)
+        leave_if_forked()  # a child the call forked, unwound back to here: not its answer
         send_answer(sock, answer, channel)
 
 

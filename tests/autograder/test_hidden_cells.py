@@ -66,7 +66,8 @@ def double(x):
 LAST = 'print("AFTER THE TESTS:", _hunt())\nraise RuntimeError("CAUGHT " + " ".join(_hunt()))\n'
 
 #: speaks the grader's protocol from its own cell: announces the hidden cell (index 1),
-#: asks for its source, and swaps in a fetcher so the real worker does not ask again
+#: asks for its source, and swaps the worker's own announcement and request for
+#: ones that keep quiet, so the grader sees the protocol followed
 FORGER = HUNT + '''
 import gc, socket, sys
 frames = sys.modules["autograder.boundary.frames"]
@@ -85,6 +86,13 @@ except Exception as exc:  # the grader did not answer: look around instead
     stolen = {"source": "", "hunt": _hunt()}
 print("STOLEN:", stolen)
 worker["_hidden_source"] = lambda sock, index, run, output: stolen["source"]
+real_announce, said = worker["_announce"], []
+def _announce(sock, index):  # cell 1 was announced above already
+    if index == 1 and not said:
+        said.append(index)
+        return
+    real_announce(sock, index)
+worker["_announce"] = _announce
 
 def double(x):
     return 2 * x if stolen["source"] else -1  # right only once the source was stolen
