@@ -376,6 +376,8 @@ class StudentProcess:
     def _violated(self, where: str, detail: str) -> None:
         """Stop the child for a protocol violation at ``where`` and remember it."""
         self._kill()
+        if self._before is not None:  # a hidden test was in the child: what it sent could hold it
+            detail = "it sent a frame out of turn (not shown: a hidden test had run)"
         self.violation = (f"{where} broke the grader's protocol: {detail}. Your code must not "
                           "read or write the worker's connection to the grader (a file "
                           "descriptor of the process), so the worker was stopped")

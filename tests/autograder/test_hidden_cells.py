@@ -187,6 +187,7 @@ def test_a_request_for_a_cell_the_worker_has_not_reached_is_refused(tmp_path: Pa
     assert _leaks(out, secret) == []
     # the cell that spoke for the worker is stopped and skipped; the rest ran without it
     assert "Cell 1 stopped the worker" in result.output
+    assert "asked for the source of cell 2" in result.output  # counted from 1, as shown
     assert {t.name: t.score for t in result.tests if t.name.startswith("test")} == {
         "test_hidden": 0.0, "test_after": 0.0}  # no `double` without the skipped cell
 
@@ -206,3 +207,31 @@ def test_an_honest_student_keeps_every_point_and_the_output_before_the_hidden_te
     assert "shown before the tests" in result.stdout
     assert "printed at the end" not in result.stdout
     assert _leaks(out, secret) == []
+
+
+#: after the hidden test: writes what it found to the grader's connection, as a frame
+#: the grader's protocol-violation message would quote
+SPEAKER = HUNTER.replace("def double(x):", """def _say(found):
+    import gc, socket, sys
+    frames = sys.modules["autograder.boundary.frames"]
+    announce = next(f for f in gc.get_objects()
+                    if type(f).__name__ == "function" and f.__name__ == "<lambda>"
+                    and f.__code__.co_filename.endswith("__main__.py") and f.__closure__)
+    sock = next(c.cell_contents for c in announce.__closure__
+                if isinstance(c.cell_contents, socket.socket))
+    tail = found[0][len("numgrade-" + "secret-"):] if found else "nothing"
+    frames.send_message(sock, {"op": tail[:30], "index": tail[:30]})
+
+def double(x):""")
+
+
+def test_a_frame_sent_after_the_hidden_test_is_not_quoted(tmp_path: Path, course) -> None:
+    assignment, secret = course
+    out = tmp_path / "out" / "s"
+    path = _student(tmp_path / "s.ipynb", [
+        (SPEAKER, "double"), ("# hidden tests run here\n", "test_hidden"),
+        ("_say(_hunt())\n", "last")])
+    result = _grade(assignment, path, out)
+    assert _leaks(out, secret[:len(PREFIX) + 30]) == []
+    assert "broke the grader's protocol" in result.output
+    assert "not shown: a hidden test had run" in result.output
