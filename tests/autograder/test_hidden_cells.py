@@ -68,16 +68,22 @@ LAST = 'print("AFTER THE TESTS:", _hunt())\nraise RuntimeError("CAUGHT " + " ".j
 #: speaks the grader's protocol from its own cell: announces the hidden cell (index 1),
 #: asks for its source, and swaps the worker's own announcement and request for
 #: ones that keep quiet, so the grader sees the protocol followed
-FORGER = HUNT + '''
-import gc, socket, sys
+CONNECTION = '''
+def _connection():
+    """The worker's socket and module, from the worker's "announce this cell" lambda."""
+    import gc, socket
+    announce = next(f for f in gc.get_objects()
+                    if type(f).__name__ == "function" and f.__name__ == "<lambda>"
+                    and f.__code__.co_filename.endswith("__main__.py") and f.__closure__)
+    sock = next(c.cell_contents for c in announce.__closure__
+                if isinstance(c.cell_contents, socket.socket))
+    return sock, announce.__globals__
+'''
+
+FORGER = HUNT + CONNECTION + '''
+import sys
 frames = sys.modules["autograder.boundary.frames"]
-# the worker's socket and module, from the worker's "announce this cell" lambda
-announce = next(f for f in gc.get_objects()
-                if type(f).__name__ == "function" and f.__name__ == "<lambda>"
-                and f.__code__.co_filename.endswith("__main__.py") and f.__closure__)
-sock = next(c.cell_contents for c in announce.__closure__
-            if isinstance(c.cell_contents, socket.socket))
-worker = announce.__globals__
+sock, worker = _connection()
 frames.send_message(sock, {"op": "cell", "index": 1})
 frames.send_message(sock, {"op": "need-source", "index": 1, "cells": [], "stdout": ""})
 try:
@@ -211,14 +217,10 @@ def test_an_honest_student_keeps_every_point_and_the_output_before_the_hidden_te
 
 #: after the hidden test: writes what it found to the grader's connection, as a frame
 #: the grader's protocol-violation message would quote
-SPEAKER = HUNTER.replace("def double(x):", """def _say(found):
-    import gc, socket, sys
+SPEAKER = CONNECTION + HUNTER.replace("def double(x):", """def _say(found):
+    import sys
     frames = sys.modules["autograder.boundary.frames"]
-    announce = next(f for f in gc.get_objects()
-                    if type(f).__name__ == "function" and f.__name__ == "<lambda>"
-                    and f.__code__.co_filename.endswith("__main__.py") and f.__closure__)
-    sock = next(c.cell_contents for c in announce.__closure__
-                if isinstance(c.cell_contents, socket.socket))
+    sock, _ = _connection()
     tail = found[0][len("numgrade-" + "secret-"):] if found else "nothing"
     frames.send_message(sock, {"op": tail[:30], "index": tail[:30]})
 
