@@ -292,7 +292,11 @@ class Grader:
         ``path`` is the student's notebook, or, for an assignment of several
         notebooks, a folder holding them under the assignment's file names. Each
         notebook runs in its own worker process; the result sums their points.
+        Raises :class:`AssignmentError` before grading anything when a package the
+        assignment requires does not import in the worker (every runner: the batch,
+        the service, Dask, Gradescope).
         """
+        self.check_requirements()  # once per grader; a no-op for most assignments
         start = time.perf_counter()
         sub_id = id or Path(path).stem
         raw_sha = submission_sha256(Path(path))

@@ -112,3 +112,15 @@ def test_requirements_key_must_be_a_list_of_strings(tmp_path: Path) -> None:
     toml.write_text(toml.read_text() + 'requirements = "pandas"\n')
     with pytest.raises(AssignmentError, match=r"\[assignment\] requirements must be a list"):
         load_assignment(folder)
+
+
+def test_every_runner_meets_the_check_through_grader_grade(tmp_path: Path) -> None:
+    """The service, Dask and Gradescope call ``Grader.grade`` directly: it checks too."""
+    from autograder.engine.grader import Grader
+
+    folder = _assignment(tmp_path, ["numgrade-no-such-package>=1"])
+    path = submission(tmp_path / "subs", "alice", RIGHT)
+    with Grader(load_assignment(folder)) as grader:
+        with pytest.raises(AssignmentError, match="needs 'numgrade-no-such-package>=1'"):
+            grader.grade(path, out_dir=tmp_path / "out" / "alice")
+    assert _nothing_written(tmp_path / "out")
