@@ -230,7 +230,7 @@ def test_the_hourly_limit_is_checked_before_the_upload_is_read(local: Local,
 
     parses: list[int] = []
     real_parse = intake.parse_notebook
-    monkeypatch.setattr(intake, "parse_notebook", lambda data: parses.append(1) or real_parse(data))
+    monkeypatch.setattr(intake, "parse_notebook", lambda data, **kw: parses.append(1) or real_parse(data, **kw))
     now = dt.datetime.now(dt.timezone.utc).replace(tzinfo=None)
     with local.engine.begin() as db:
         for minutes in range(PER_HOUR):
