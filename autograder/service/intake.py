@@ -15,7 +15,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.engine.assignment import load_assignment
 from autograder.engine.identify import identify
-from autograder.engine.notebook import parse_notebook
+from autograder.engine.notebook import Notebook, parse_notebook
 from autograder.errors import AssignmentError, NotebookError, UploadRejected
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
@@ -24,8 +24,8 @@ from autograder.service.standing import deadline_for
 from autograder.service.storage import Storage
 
 
-def check_notebook(data: bytes, max_bytes: int) -> None:
-    """Raise :class:`UploadRejected` unless ``data`` is a notebook the engine can read."""
+def check_notebook(data: bytes, max_bytes: int, filename: str = "") -> Notebook:
+    """The notebook in ``data``; :class:`UploadRejected` unless the engine can read it."""
     if len(data) > max_bytes:
         raise UploadRejected(f"The file is {len(data) / 1e6:.1f} MB; uploads may be at most "
                              f"{max_bytes / 1e6:.1f} MB. Clear the notebook's outputs "
@@ -33,7 +33,7 @@ def check_notebook(data: bytes, max_bytes: int) -> None:
     if not data.strip():
         raise UploadRejected("The file is empty; upload your .ipynb notebook.")
     try:
-        parse_notebook(data)
+        return parse_notebook(data, path=Path(filename or "upload.ipynb").name)
     except NotebookError as exc:
         raise UploadRejected(f"This is not a notebook the grader can read: {exc}",
                              status=422) from None
@@ -56,7 +56,7 @@ def precheck(factory: sessionmaker[Session], course: Course, *, user_id: str, as
     return policy
 
 
-def check_assignment(data: bytes, policy: AssignmentPolicy, filename: str) -> None:
+def check_assignment(data: bytes | Notebook, policy: AssignmentPolicy, filename: str) -> None:
     """Raise :class:`UploadRejected` when ``data`` is another assignment's notebook.
 
     A notebook of another assignment would be graded as a zero that nobody asked
@@ -66,7 +66,8 @@ def check_assignment(data: bytes, policy: AssignmentPolicy, filename: str) -> No
         assignment = load_assignment(policy.spec)
     except AssignmentError:  # the grader reports a broken assignment with the submission
         return
-    notebook = parse_notebook(data, path=Path(filename or "notebook.ipynb").name)
+    notebook = (data if isinstance(data, Notebook) else
+                parse_notebook(data, path=Path(filename or "notebook.ipynb").name))
     problem = identify(notebook, assignment).problem
     if problem:
         raise UploadRejected(f"This upload was not accepted: {problem[0].upper()}{problem[1:]} "
@@ -81,8 +82,8 @@ def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, 
         check_notebook(data, course.max_upload_bytes)
     now = now or utcnow()
     policy = precheck(factory, course, user_id=user_id, assignment=assignment, now=now)
-    check_notebook(data, course.max_upload_bytes)
-    check_assignment(data, policy, filename)
+    notebook = check_notebook(data, course.max_upload_bytes, filename)  # parsed once
+    check_assignment(notebook, policy, filename)
     with factory.begin() as session:
         session.execute(select(User).where(User.id == user_id).with_for_update()).scalar_one()
         deadline = _check_open(session, policy, user_id, now)
