@@ -68,11 +68,11 @@ def identify(notebook: Notebook, assignment: Assignment, *,
     assignments beside ``assignment``'s folder).
     """
     ours = fingerprint(assignment)
-    others = known_fingerprints(assignment) if others is None else others
     marks = _marks(notebook)
     mine = len(marks & ours.marks)
     answered = {c.grade_id for c in notebook.cells} & set(ours.answers)
-    if not answered:
+    if not answered:  # only then the neighbours are read (an answered notebook is ours)
+        others = known_fingerprints(assignment) if others is None else others
         best = max(others, key=lambda f: len(marks & f.marks), default=None)
         theirs = len(marks & best.marks) if best is not None else 0
         if theirs > mine:
