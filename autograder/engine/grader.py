@@ -191,6 +191,19 @@ class _Unreadable:
         raise WorkerCrashed(self.message)
 
 
+def budgets(assignment: Assignment, options: GradingOptions) -> tuple[float, float]:
+    """The notebook's CPU time limit and the whole submission's CPU budget, in seconds."""
+    notebook_timeout = options.notebook_timeout or assignment.notebook_timeout
+    call_timeout = options.call_timeout or assignment.call_timeout
+    return notebook_timeout, options.cpu_budget or notebook_timeout + 20 * call_timeout
+
+
+def submission_wall_limit(assignment: Assignment, options: GradingOptions) -> float:
+    """The most wall-clock seconds one submission's code can hold a grader, for runners that
+    watch a grading from outside (the service's lease keepers)."""
+    return wall_limit(*budgets(assignment, options))
+
+
 class Grader:
     """Grades submissions of one assignment, one at a time, on one grading slot."""
 
@@ -436,9 +449,7 @@ class Grader:
 
     def _budgets(self) -> tuple[float, float]:
         """The notebook's CPU time limit and the whole submission's CPU budget, in seconds."""
-        notebook_timeout = self.options.notebook_timeout or self.assignment.notebook_timeout
-        call_timeout = self.options.call_timeout or self.assignment.call_timeout
-        return notebook_timeout, self.options.cpu_budget or notebook_timeout + 20 * call_timeout
+        return budgets(self.assignment, self.options)
 
     def wall_limit(self) -> float:
         """The most wall-clock seconds the student's code of one submission can hold the grader

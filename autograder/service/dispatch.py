@@ -7,7 +7,8 @@ the cluster through the Dask backend (:class:`~autograder.runners.dask_cluster.G
 one :class:`~autograder.runners.dask_cluster.GradingSlots` per assignment
 bundle, :func:`~autograder.runners.dask_cluster.grade_task`), and keeps at
 most as many jobs out as the cluster has grading slots. One thread renews the
-lease of every job that is out. Each result is written into the job's result
+lease of every job that is out, until the grading's whole budget is spent:
+a grading still out then gets an "error" result and is tried again. Each result is written into the job's result
 folder as :func:`autograder.service.graders.grade_job` writes it and recorded
 with :func:`autograder.service.jobqueue.finish`.
 
@@ -32,7 +33,12 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.engine.assignment import Assignment, load_assignment
-from autograder.engine.grader import GradingOptions, client_key, error_result
+from autograder.engine.grader import (
+    GradingOptions,
+    client_key,
+    error_result,
+    submission_wall_limit,
+)
 from autograder.errors import EngineError
 from autograder.results.model import SubmissionResult
 from autograder.results.store import write_submission
@@ -40,7 +46,7 @@ from autograder.runners.backends import load_dask_backend
 from autograder.service import jobqueue
 from autograder.service.course import load_course
 from autograder.service.db import make_engine, sessions
-from autograder.service.graders import engine_error, load_submission
+from autograder.service.graders import OVERRUN_FACTOR, OVERRUN_SLACK, engine_error, load_submission
 from autograder.service.models import Submission
 from autograder.service.settings import GraderSettings
 from autograder.service.storage import Storage
@@ -65,6 +71,9 @@ class _Flight:
     assignment: Assignment | None = None
     options: GradingOptions | None = None
     slots: str = ""
+    #: when (``time.monotonic()``) the grading is overdue: past it, its lease is no longer
+    #: renewed and it gets an "error" result (retried), as a stuck local grader is replaced
+    deadline: float | None = None
 
     @property
     def title(self) -> str:
@@ -72,11 +81,12 @@ class _Flight:
 
 
 class _Leases:
-    """Renews the lease of every job that is out, every third of the lease, from one thread."""
+    """Renews the lease of every job that is out, every third of the lease, from one thread;
+    never past the job's deadline (a grading stuck on the cluster must not hold its job forever)."""
 
     def __init__(self, factory: sessionmaker[Session], lease_seconds: float) -> None:
         self._factory, self._seconds = factory, lease_seconds
-        self._held: dict[int, jobqueue.Claimed] = {}
+        self._held: dict[int, tuple[jobqueue.Claimed, float | None]] = {}
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="keep-leases")
@@ -84,9 +94,9 @@ class _Leases:
     def start(self) -> None:
         self._thread.start()
 
-    def hold(self, job: jobqueue.Claimed) -> None:
+    def hold(self, job: jobqueue.Claimed, deadline: float | None = None) -> None:
         with self._lock:
-            self._held[job.job_id] = job
+            self._held[job.job_id] = (job, deadline)
 
     def release(self, job: jobqueue.Claimed) -> None:
         with self._lock:
@@ -96,7 +106,9 @@ class _Leases:
         while not self._stop.wait(self._seconds / 3):
             with self._lock:
                 held = list(self._held.values())
-            for job in held:
+            for job, deadline in held:
+                if deadline is not None and time.monotonic() >= deadline:
+                    continue  # overdue: the dispatcher records its error; the lease runs out
                 try:
                     if not jobqueue.renew(self._factory, job, lease_seconds=self._seconds):
                         self.release(job)  # taken over: finishing it will find it "lost"
@@ -192,7 +204,10 @@ class Dispatcher:
                               "course file")
         assignment = load_assignment(policy.spec)
         options = GradingOptions(public_only=policy.public_only)
-        flight = replace(flight, assignment=assignment, options=options)
+        deadline = (time.monotonic() + OVERRUN_FACTOR * submission_wall_limit(assignment, options)
+                    + OVERRUN_SLACK)
+        self.leases.hold(flight.job, deadline)
+        flight = replace(flight, assignment=assignment, options=options, deadline=deadline)
         return replace(flight, slots=self.stream.slots_for(assignment, options))
 
     def _collect(self, timeout: float) -> None:
@@ -207,6 +222,7 @@ class Dispatcher:
             self._record(flight, self._result(flight, future))
         if not done:
             self._fail_refused()
+        self._fail_overdue()
         self.stream.retire_unused({f.slots for f in self.out.values()})
 
     def _result(self, flight: _Flight, future: Any) -> SubmissionResult:
@@ -239,6 +255,18 @@ class Dispatcher:
                 future.cancel()
                 del self.out[future]
                 self._record(flight, self._error(flight, refused[flight.slots]))
+
+    def _fail_overdue(self) -> None:
+        """A grading out past its whole budget (a stuck Dask worker) gets an "error" result and
+        is retried under ``max_tries``; its lease is no longer renewed."""
+        now = time.monotonic()
+        for future, flight in list(self.out.items()):
+            if flight.deadline is not None and now >= flight.deadline:
+                future.cancel()
+                del self.out[future]
+                self._record(flight, self._error(flight, EngineError(
+                    "the grading ran past its whole time budget on the Dask cluster (a worker "
+                    "that stopped answering); it is graded again")))
 
     def _lose_everything(self, exc: BaseException) -> None:
         """The connection failed: every job out gets an "error" result; the next job connects anew."""

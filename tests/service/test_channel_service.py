@@ -136,3 +136,50 @@ def test_the_grading_deadline_covers_the_submissions_whole_budget() -> None:
     # hull: notebook 60 s, calls 10 s: a CPU budget of 260 s, backstops 4x + 15 s
     assert limit >= 2 * (4 * 260 + 15) + 4 * (4 * 60 + 15)
     assert deadline is not None and deadline - time.monotonic() >= limit
+
+
+def test_the_dispatcher_does_not_renew_an_overdue_lease(monkeypatch: pytest.MonkeyPatch) -> None:
+    from autograder.service import dispatch
+
+    stop = threading.Event()
+    renewed: list[int] = []
+
+    def renew(factory: Any, job: jobqueue.Claimed, *, lease_seconds: float) -> bool:
+        renewed.append(job.job_id)
+        if len(renewed) >= 6:
+            stop.set()
+        return True
+
+    monkeypatch.setattr(jobqueue, "renew", renew)
+    leases = dispatch._Leases(None, lease_seconds=0.03)  # type: ignore[arg-type]
+    leases._stop = stop
+    leases.hold(JOB, deadline=time.monotonic() + 3600)
+    leases.hold(jobqueue.Claimed(job_id=2, submission_id=2, kind="grade", claim="d", tries=1),
+                deadline=time.monotonic() - 1)
+    leases._run()
+    assert renewed and set(renewed) == {1}
+
+
+def test_the_dispatcher_gives_an_overdue_grading_an_error_result() -> None:
+    from autograder.service import dispatch
+
+    recorded: list[tuple[Any, Any]] = []
+    cancelled: list[str] = []
+
+    class Future:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def cancel(self) -> None:
+            cancelled.append(self.name)
+
+    late = dispatch._Flight(JOB, None, Path("late.ipynb"), deadline=time.monotonic() - 1)  # type: ignore[arg-type]
+    fresh = dispatch._Flight(JOB, None, Path("fresh.ipynb"), deadline=time.monotonic() + 3600)  # type: ignore[arg-type]
+    held = dispatch.Dispatcher.__new__(dispatch.Dispatcher)
+    held.out = {Future("late"): late, Future("fresh"): fresh}
+    held._error = lambda flight, exc: str(exc)  # type: ignore[method-assign]
+    held._record = lambda flight, result: recorded.append((flight, result))  # type: ignore[method-assign]
+    held._fail_overdue()
+    assert cancelled == ["late"] and [f for f, _ in recorded] == [late]
+    assert "time budget" in recorded[0][1]
+    assert list(held.out.values()) == [fresh]
