@@ -1,21 +1,30 @@
 """Accepting an upload: every check first, then one transaction (store, submission, job).
 
-A rejected upload (too large, not a notebook, closed assignment, too many this
-hour) gets a clear message and leaves nothing behind.
+An upload is a notebook or a zip holding the assignment's notebooks (what otter
+and Gradescope hand out); a zip is unpacked with the engine's own checks
+(:func:`autograder.engine.submission.open_submission`) into a scratch folder that
+is removed at once, so a zip the grader would call ungradable is refused here.
+A rejected upload (too large, not a notebook, a zip without the notebook,
+another assignment's notebook, closed assignment, too many this hour) gets a
+clear message and leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import math
+import os
+import tempfile
+import threading
 from pathlib import Path
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 
-from autograder.engine.assignment import load_assignment
+from autograder.engine.assignment import Assignment, load_assignment
 from autograder.engine.identify import identify
 from autograder.engine.notebook import Notebook, parse_notebook
+from autograder.engine.submission import open_submission
 from autograder.errors import AssignmentError, NotebookError, UploadRejected
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
@@ -56,6 +65,77 @@ def precheck(factory: sessionmaker[Session], course: Course, *, user_id: str, as
     return policy
 
 
+#: the first bytes of a zip's local file header
+ZIP_MAGIC = b"PK\x03\x04"
+
+
+def is_zip_upload(data: bytes, filename: str) -> bool:
+    """A zip by its content (a browser may name it anything) or by its name."""
+    return data[:4] == ZIP_MAGIC or filename.lower().endswith(".zip")
+
+
+class _Assignments:
+    """The assignments the intake checks uploads against, loaded once each.
+
+    Loading reads the instructor notebook and every check file; an upload needs
+    only what it gives. An assignment is loaded again when any file of its folder
+    changed (size or modification time), so an instructor's edit is seen by the
+    next upload, never a stale copy.
+    """
+
+    def __init__(self) -> None:
+        self._held: dict[str, tuple[tuple[tuple[str, int, int], ...], Assignment]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, spec: str) -> Assignment:
+        with self._lock:
+            held = self._held.get(spec)
+        if held is not None and held[0] == _signature(held[1].root):
+            return held[1]
+        assignment = load_assignment(spec)
+        with self._lock:
+            self._held[spec] = (_signature(assignment.root), assignment)
+        return assignment
+
+
+def _signature(root: Path) -> tuple[tuple[str, int, int], ...]:
+    found = []
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = sorted(d for d in dirs if d not in ("__pycache__", ".ipynb_checkpoints"))
+        for name in sorted(files):
+            try:
+                info = os.stat(os.path.join(folder, name))
+            except OSError:
+                continue
+            found.append((os.path.join(folder, name), info.st_size, info.st_mtime_ns))
+    return tuple(found)
+
+
+ASSIGNMENTS = _Assignments()
+
+
+def check_zip(data: bytes, max_bytes: int, policy: AssignmentPolicy) -> None:
+    """Raise :class:`UploadRejected` unless the zip ``data`` holds notebooks of ``policy``'s
+    assignment that the engine can read; the unpacked files are removed at once."""
+    if len(data) > max_bytes:
+        check_notebook(data, max_bytes)  # the size message
+    try:
+        assignment = ASSIGNMENTS.get(policy.spec)
+    except AssignmentError:  # the grader reports a broken assignment with the submission
+        return
+    with tempfile.TemporaryDirectory(prefix="numgrade-upload-") as scratch:
+        archive = Path(scratch) / "upload.zip"
+        archive.write_bytes(data)
+        submission = open_submission(archive, assignment.notebooks, scratch=Path(scratch))
+        if submission.problem:
+            raise UploadRejected(f"This zip was not accepted: {submission.problem} Nothing was "
+                                 "stored.", status=422)
+        for name, path in submission.notebooks:
+            notebook = check_notebook(path.read_bytes(), max_bytes, name)
+            if name == assignment.notebook.name:
+                _check_identity(notebook, assignment)
+
+
 def check_assignment(data: bytes | Notebook, policy: AssignmentPolicy, filename: str) -> None:
     """Raise :class:`UploadRejected` when ``data`` is another assignment's notebook.
 
@@ -63,11 +143,15 @@ def check_assignment(data: bytes | Notebook, policy: AssignmentPolicy, filename:
     for (:mod:`autograder.engine.identify` says whose it is).
     """
     try:
-        assignment = load_assignment(policy.spec)
+        assignment = ASSIGNMENTS.get(policy.spec)
     except AssignmentError:  # the grader reports a broken assignment with the submission
         return
     notebook = (data if isinstance(data, Notebook) else
                 parse_notebook(data, path=Path(filename or "notebook.ipynb").name))
+    _check_identity(notebook, assignment)
+
+
+def _check_identity(notebook: Notebook, assignment: Assignment) -> None:
     problem = identify(notebook, assignment).problem
     if problem:
         raise UploadRejected(f"This upload was not accepted: {problem[0].upper()}{problem[1:]} "
@@ -82,13 +166,18 @@ def accept(factory: sessionmaker[Session], storage: Storage, course: Course, *, 
         check_notebook(data, course.max_upload_bytes)
     now = now or utcnow()
     policy = precheck(factory, course, user_id=user_id, assignment=assignment, now=now)
-    notebook = check_notebook(data, course.max_upload_bytes, filename)  # parsed once
-    check_assignment(notebook, policy, filename)
+    zipped = is_zip_upload(data, filename)
+    if zipped:
+        check_zip(data, course.max_upload_bytes, policy)
+        filename = filename if filename.lower().endswith(".zip") else f"{Path(filename).stem or 'submission'}.zip"
+    else:
+        notebook = check_notebook(data, course.max_upload_bytes, filename)  # parsed once
+        check_assignment(notebook, policy, filename)
     with factory.begin() as session:
         session.execute(select(User).where(User.id == user_id).with_for_update()).scalar_one()
         deadline = _check_open(session, policy, user_id, now)
         _check_rate(session, course, user_id, assignment, now)
-        sha = storage.store(data)
+        sha = storage.store(data, suffix=".zip" if zipped else ".ipynb")
         late = policy.late_days(now, deadline)
         submission = Submission(user_id=user_id, assignment=assignment, sha256=sha,
                                 filename=Path(filename or "notebook.ipynb").name[:256],

@@ -154,7 +154,7 @@ async def submit(request: Request, name: str, who: SignedIn, policy: Assignment,
         check_csrf(who, form, request)
         upload = form.get("notebook")
         if upload is None or isinstance(upload, str):
-            raise UploadRejected("Choose your .ipynb notebook to upload.")
+            raise UploadRejected("Choose your .ipynb notebook (or a zip holding it) to upload.")
         data = await upload.read(svc.course.max_upload_bytes + 1)
         sub = await run_in_threadpool(accept, svc.factory, svc.storage, svc.course, user_id=who.id,
                                       assignment=name, filename=upload.filename or "", data=data)
