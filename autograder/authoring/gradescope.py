@@ -70,15 +70,38 @@ def gradescope_entries(assignment: Assignment) -> list[tuple[str, Path | bytes, 
     entries += [(name, root / name, False) for name in ("pyproject.toml", "README.md")]
     for package in ("autograder", "reference"):
         entries += [(p.relative_to(root).as_posix(), p, False) for p in _files(root / package)]
-    # The instructor notebook holds the solutions: the zip carries the released one in
-    # its place (the grader needs it only to restore locked cells).
-    from autograder.authoring.release import student_template  # imports nbgrader: instructors only
-
-    released = nbformat.writes(student_template(assignment)).encode()
+    # The instructor notebooks hold the solutions: the zip carries each without them.
+    bundled = {nb: nbformat.writes(bundled_notebook(assignment, nb)).encode()
+               for nb in assignment.notebooks}
     for path in _files(assignment.root, skip_top=("examples",)):
         name = f"assignment/{assignment.name}/{path.relative_to(assignment.root).as_posix()}"
-        entries.append((name, released if path == assignment.notebook else path, False))
+        entries.append((name, bundled.get(path, path), False))
     return entries
+
+
+def bundled_notebook(assignment: Assignment, notebook: Path) -> nbformat.NotebookNode:
+    """The instructor notebook ``notebook`` as the zip carries it: without solutions.
+
+    For numgrade's own format that is the released notebook (the grader needs it
+    only to restore locked cells; the checks are files). Where the tests are cells
+    (nbgrader's test cells, otter's test blocks) they are kept, hidden ones
+    included, so the assignment loads from the zip with every test and its points.
+    """
+    from autograder.authoring.otter_release import otter_bundle
+    from autograder.authoring.release import student_template  # imports nbgrader: instructors only
+    from autograder.engine.otter_format import is_otter_notebook
+
+    if is_otter_notebook(notebook):
+        return otter_bundle(assignment)
+    if not any(t.notebook == notebook.name for t in assignment.cell_tests):
+        return student_template(assignment, notebook)
+    from nbgrader import preprocessors
+
+    book = nbformat.read(str(notebook), as_version=4)
+    resources: dict[str, object] = {}
+    for name in ("ClearSolutions", "ClearOutput"):
+        book, resources = getattr(preprocessors, name)().preprocess(book, resources)
+    return book
 
 
 def gradescope_zip(assignment: Assignment, out_dir: Path) -> Path:
@@ -106,7 +129,8 @@ def gradescope_zip(assignment: Assignment, out_dir: Path) -> Path:
 
 def bundled_assignment(source: Path) -> Path:
     """The one assignment folder in an unpacked zip (``source/assignment/<name>/``)."""
-    found = sorted(p.parent for p in (source / "assignment").glob("*/assignment.toml"))
+    # one folder: numgrade's own (assignment.toml) or an nbgrader or otter assignment
+    found = sorted(p for p in (source / "assignment").glob("*") if p.is_dir())
     if len(found) != 1:
         raise UsageError(f"Expected one assignment under {source / 'assignment'}, found "
                          f"{len(found)}; rebuild the zip with 'autograder gradescope'.")
@@ -147,7 +171,10 @@ def pick_notebook(folder: Path, expected_name: str) -> tuple[Path, str]:
 def run_submission(root: Path) -> "SubmissionResult":
     """Grade ``root/submission/`` against the bundled assignment into ``root/results/``."""
     found = load_assignment(bundled_assignment(root / "source"))
-    notebook, note = pick_notebook(root / "submission", found.notebook.name)
+    if len(found.notebooks) > 1:  # the grader takes the folder and finds each notebook
+        notebook, note = root / "submission", ""
+    else:
+        notebook, note = pick_notebook(root / "submission", found.notebook.name)
     student = gradescope_student(root) or notebook.stem
     out = root / "results"
     with Grader(found) as grader:

@@ -35,7 +35,7 @@ from autograder.engine.otter_format import (
     BOUNDARY, CONFIG, OtterNotebook, OtterQuestion, case_points, doctest_text, read_otter)
 from autograder.errors import AssignmentError
 
-__all__ = ["otter_template", "strip_solutions", "verify_no_hidden_tests"]
+__all__ = ["otter_bundle", "otter_template", "strip_solutions", "verify_no_hidden_tests"]
 
 # otter's solution_assignment_regex, solution_line_regex and begin_solution_regex
 _ASSIGNMENT = re.compile(r"(\s*(?:[\w.]+(?=[^\w.])(?:\[['\"]?.*['\"]?\])*(?:,\s*)?)+\s*=).* ?# ?SOLUTION")
@@ -137,6 +137,34 @@ def otter_template(assignment: Assignment) -> nbformat.NotebookNode:
                                       if not q.manual and any(not c.hidden for c in q.cases)}}
     verify_template(assignment, otter, nbformat.writes(nb))
     return nb
+
+
+def otter_bundle(assignment: Assignment) -> nbformat.NotebookNode:
+    """The master notebook without its solutions, for staff bundles (the Gradescope zip).
+
+    Every question, config and test cell is kept, hidden tests included, so that
+    the assignment loads from the bundle with the same tests and points; only
+    what is between ``# BEGIN SOLUTION`` and ``# END SOLUTION`` (and ``# SOLUTION``
+    lines) is replaced as in the student notebook.
+    """
+    master = nbformat.read(str(assignment.notebook), as_version=4)
+    cells: list[Any] = []
+    block = None
+    for number, cell in enumerate(master.cells, start=1):
+        first = (str(cell.source).splitlines() or [""])[0]
+        boundary = BOUNDARY.match(first) if cell.cell_type == "raw" else None
+        if boundary:
+            edge, kind = boundary.group(1).lower(), boundary.group(2).lower()
+            block = kind if edge == "begin" and kind != "question" else None
+        if boundary or block == "tests" or (cell.cell_type == "raw" and CONFIG.match(first)):
+            cells.append(nbformat.from_dict(dict(cell)))
+            continue
+        student = _student_cell(cell, in_solution=block == "solution",
+                                where=f"{assignment.notebook}: cell {number}")
+        if cell.cell_type == "code":
+            student.metadata = dict(cell.metadata)  # the same cell, without its answer
+        cells.append(student)
+    return nbformat.v4.new_notebook(cells=cells, metadata=dict(master.metadata))
 
 
 def _question_name(cell: Any) -> str:

@@ -356,3 +356,35 @@ def test_folders_that_are_not_assignments_are_named(course: Path, tmp_path: Path
                    tmp_path / "plain" / "a.ipynb")
     with pytest.raises(AssignmentError, match="no assignment.toml and no nbgrader notebook"):
         load_assignment(tmp_path / "plain")
+
+
+def test_the_gradescope_zip_of_an_nbgrader_course_scores_as_nbgrader(course: Path,
+                                                                     tmp_path: Path) -> None:
+    """Both notebooks bundled without solutions but with their hidden tests; each student's
+    folder graded by the zip's run as nbgrader graded it."""
+    import zipfile
+
+    from autograder.authoring.gradescope import gradescope_zip, run_submission
+
+    assignment = load_assignment(course / "source" / "ps1")
+    archive = gradescope_zip(assignment, tmp_path / "zip")
+    with zipfile.ZipFile(archive) as bundle:
+        books = {n: bundle.read(n).decode() for n in bundle.namelist() if n.endswith(".ipynb")}
+        assert set(books) == {"assignment/ps1/problem1.ipynb", "assignment/ps1/problem2.ipynb"}
+        for text in books.values():
+            assert "BEGIN SOLUTION" not in text and "raise ValueError('n must" not in text
+            assert "len(IMAGE.read_bytes())" not in text
+        assert sum(HIDDEN_MARK in text for text in books.values()) == 2  # the grader needs them
+        expected = _nbgrader_scores(course)
+        got = {}
+        for student in STUDENTS:
+            root = tmp_path / "gradescope" / student
+            bundle.extractall(root / "source")
+            shutil.copytree(course / "submitted" / student / "ps1", root / "submission")
+            (root / "results").mkdir()
+            result = run_submission(root)
+            got[student] = sum(t.score for t in result.tests if t.kind != "needs-person")
+            assert {t.notebook for t in result.tests} == {"problem1.ipynb", "problem2.ipynb"}
+            data = json.loads((root / "results" / "results.json").read_text())
+            assert HIDDEN_MARK not in json.dumps(data)
+    assert got == expected

@@ -317,3 +317,32 @@ def test_requirements_txt_fills_assignment_requirements(tmp_path: Path) -> None:
     assignment = load_assignment(folder)
     assert assignment.requirements == ("scipy>=1.11", "pandas>=2")  # otter's own is not needed
     assert [t.name for t in assignment.cell_tests] == ["q1 - 1"]
+
+
+def test_the_gradescope_zip_of_an_otter_assignment_scores_as_otter_run(
+        course: dict[str, object], tmp_path: Path) -> None:
+    """The zip carries the master without its solutions and with every test, hidden ones
+    included: each student scores in Gradescope's run as ``otter run`` scored them."""
+    import shutil
+    import zipfile
+
+    from autograder.authoring.gradescope import gradescope_zip, run_submission
+    from autograder.engine.assignment import load_assignment
+
+    assignment = load_assignment(Path(str(course["folder"])))
+    archive = gradescope_zip(assignment, tmp_path / "zip")
+    with zipfile.ZipFile(archive) as bundle:
+        master = bundle.read(f"assignment/{assignment.name}/otterhw.ipynb").decode()
+        for answer in ("x = 4", "return n ** 2", "np.linspace(0, 1, 5)"):
+            assert answer not in master  # the solutions' code (their markers stay)
+        assert "square(-2)" in master and "float(arr.sum())" in master  # hidden tests
+        got = {}
+        for name in STUDENTS:
+            root = tmp_path / name
+            bundle.extractall(root / "source")
+            (root / "submission").mkdir()
+            (root / "results").mkdir()
+            shutil.copy(Path(str(course["root"])) / "subs" / f"{name}.ipynb",
+                        root / "submission" / "otterhw.ipynb")
+            got[name] = run_submission(root).score
+    assert got == pytest.approx(course["otter"])
