@@ -158,8 +158,11 @@ def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
     opts = GradingOptions(policy=base.policy, notebook_timeout=base.notebook_timeout,
                           call_timeout=base.call_timeout, public_only=True,
                           max_notebook_bytes=base.max_notebook_bytes)
+    # An assignment of several notebooks is checked whole: the folder the notebook sits
+    # in holds the others, each found by its file name (a missing one is named).
+    target = notebook.parent if len(found.notebooks) > 1 and notebook.is_file() else notebook
     with Grader(found, opts, started_slot=started_slot) as grader:
-        return grader.grade(notebook)
+        return grader.grade(target)
 
 
 def _guess(notebook: Path) -> Assignment:

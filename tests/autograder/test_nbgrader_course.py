@@ -311,6 +311,15 @@ def test_grade_and_release_an_nbgrader_course_from_the_command_line(course: Path
     for name in ("problem1.ipynb", "problem2.ipynb"):
         text = (tmp_path / "release" / name).read_text()
         assert HIDDEN_MARK not in text and "BEGIN SOLUTION" not in text
+    # a student checks problem2 in the released folder: both notebooks, each its own tests
+    from autograder import api
+
+    for name in ("problem1.ipynb", "problem2.ipynb"):
+        shutil.copy(course / "submitted" / "bob" / "ps1" / name, tmp_path / "release" / name)
+    checked = api.check(tmp_path / "release" / "problem2.ipynb")
+    by_name = {t.name: (t.notebook, t.score) for t in checked.tests if t.kind != "needs-person"}
+    assert by_name["test_size"] == ("problem2.ipynb", 3.0)  # its public part passes
+    assert by_name["correct_squares"][0] == "problem1.ipynb"
     graded = subprocess.run(
         [sys.executable, "-m", "autograder", "grade", str(course / "source" / "ps1"),
          str(course / "submitted"), "--out", str(tmp_path / "results"), "--no-progress"],
