@@ -90,6 +90,15 @@ def manual_result(cell: ManualCell) -> CheckResult:
                               "its points are not counted yet.")
 
 
+def unanswered_result(cell: ManualCell) -> CheckResult:
+    """The result of an answer cell a person grades that the student left as released:
+    0 points, as nbgrader gives it, and no person needed."""
+    return CheckResult(name=cell.name, score=0.0, max_score=cell.points, hidden=False,
+                       kind="missing",
+                       output=f"No response: this answer is as it was released, so it gets 0 of "
+                              f"{cell.points:g} point(s) without waiting for a person.")
+
+
 # Written by hand: nbgrader runs test cells as plain kernel cells and reads their
 # outputs from the executed notebook; our worker reports only how a cell ended, so
 # this wrapper turns nbgrader's output rules (stderr, a number as the result) into

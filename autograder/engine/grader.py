@@ -37,9 +37,10 @@ from autograder.engine.celltests import (
     manual_result,
     place_cell_tests,
     score_cell_tests,
+    unanswered_result,
     withhold_after_hidden,
 )
-from autograder.engine.identify import identify
+from autograder.engine.identify import identify, released_answers, unanswered
 from autograder.engine.notebook import Notebook, locked_cells, read_notebook, restore_locked
 from autograder.engine.plugin import CheckContext
 from autograder.engine.slot import GradingSlot
@@ -386,8 +387,14 @@ class Grader:
         return _result(self.assignment.name, "ungradable", message,
                        cell_tests + tests + self._manual(name), seed)
 
-    def _manual(self, name: str) -> tuple[CheckResult, ...]:
-        return tuple(manual_result(m) for m in self.assignment.manual_cells if m.notebook == name)
+    def _manual(self, name: str, student: Path | None = None) -> tuple[CheckResult, ...]:
+        cells = [m for m in self.assignment.manual_cells if m.notebook == name]
+        empty: set[str] = set()
+        if student is not None and any(m.kind == "answer" for m in cells):
+            source = next(nb for nb in self.assignment.notebooks if nb.name == name)
+            empty = unanswered(student, released_answers(source))
+        return tuple(unanswered_result(m) if m.kind == "answer" and m.name in empty
+                     else manual_result(m) for m in cells)
 
     def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None,
                         digest: str, *, name: str, runs_checks: bool) -> SubmissionResult:
@@ -424,7 +431,7 @@ class Grader:
         outcome = ("timeout" if run.timed_out_cells else
                    "crashed" if run.crashed or run.crashed_cells else "graded")
         result = _result(self.assignment.name, outcome, summarise_run(run, notebook),
-                         cell_tests + tests + self._manual(name), seed)
+                         cell_tests + tests + self._manual(name, notebook.path), seed)
         return replace(result, stdout=run.stdout,
                        notes=(tuple(run.notes) + tuple(notebook.warnings) + placed.notes
                               + review_notes(report, numbers)

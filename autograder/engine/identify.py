@@ -185,6 +185,48 @@ def _fingerprint(name: str, stamps: tuple[tuple[str, int], ...]) -> Fingerprint:
                        stubs=tuple(stubs), template=tuple(template))
 
 
+def released_answers(path: Path) -> dict[str, str]:
+    """grade_id -> the released text (stripped) of each answer cell a person grades in the
+    instructor notebook ``path`` (nbgrader's ``grade`` and ``solution``, markdown or code);
+    ``{}`` without nbgrader. Cached while the file is unchanged."""
+    return dict(_released_answers(str(path), _mtime(Path(path))))
+
+
+@functools.lru_cache(maxsize=64)
+def _released_answers(path: str, stamp: int) -> tuple[tuple[str, str], ...]:
+    try:
+        released = _released(nbformat.read(path, as_version=4))
+    except (OSError, ValueError) as exc:
+        _LOG.warning("could not read %s for its answer cells: %s", path, exc)
+        return ()
+    if released is None:
+        return ()
+    found = []
+    for cell in released.cells:
+        meta = cell.get("metadata", {}).get("nbgrader", {})
+        if meta.get("grade") and meta.get("solution") and isinstance(meta.get("grade_id"), str):
+            found.append((meta["grade_id"], _text(cell.source).strip()))
+    return tuple(found)
+
+
+def unanswered(student: Path, released: dict[str, str]) -> set[str]:
+    """grade_ids of the answer cells ``released`` that the student's notebook holds as
+    released (nbgrader gives such an answer 0 and asks no person: "No response")."""
+    if not released:
+        return set()
+    try:
+        nb = nbformat.read(str(student), as_version=4)
+    except (OSError, ValueError):
+        return set()
+    found = set()
+    for cell in nb.cells:
+        grade_id = cell.get("metadata", {}).get("nbgrader", {}).get("grade_id")
+        if isinstance(grade_id, str) and grade_id in released and \
+                _text(cell.get("source", "")).strip() == released[grade_id]:
+            found.add(grade_id)
+    return found
+
+
 def _released(nb: Any) -> Any:
     """The student version's cells, by nbgrader's own passes; None without nbgrader.
 
@@ -210,4 +252,5 @@ def _text(source: Any) -> str:
     return "".join(source) if isinstance(source, list) else str(source)
 
 
-__all__ = ["Fingerprint", "Identity", "fingerprint", "identify", "known_fingerprints"]
+__all__ = ["Fingerprint", "Identity", "fingerprint", "identify", "known_fingerprints",
+           "released_answers", "unanswered"]

@@ -161,7 +161,8 @@ def _source_notebooks() -> dict[str, nbformat.NotebookNode]:
 STUDENTS = {
     "alice": {"squares": "def squares(n):\n    if n < 1:\n        raise ValueError('no')\n"
                          "    return [i * i for i in range(1, n + 1)]\n",
-              "size": "def image_bytes():\n    return len(IMAGE.read_bytes())\n"},
+              "size": "def image_bytes():\n    return len(IMAGE.read_bytes())\n",
+              "explain": "The squares grow like $n^2$."},
     "bob": {"squares": "def squares(n):\n    return [i * i for i in range(1, min(n, 4) + 1)]\n",
             "size": "def image_bytes():\n    return len(IMAGE.read_bytes())\n"},
     "carol": {"squares": "def squares(n):\n    return undefined_name\n",
@@ -217,6 +218,15 @@ def _nbgrader_scores(course: Path) -> dict[str, float]:
     return scores
 
 
+def _nbgrader_unanswered(course: Path) -> dict[str, bool]:
+    """Whether nbgrader scored each student's written answer 0 without asking a person."""
+    from nbgrader.api import Gradebook
+
+    with Gradebook(f"sqlite:///{course / 'gradebook.db'}") as gradebook:
+        grades = {s: gradebook.find_grade("explain", "problem1", "ps1", s) for s in STUDENTS}
+        return {s: g.auto_score == 0 and not g.needs_manual_grade for s, g in grades.items()}
+
+
 def test_numgrade_scores_an_nbgrader_course_as_nbgrader_does(course: Path, tmp_path: Path) -> None:
     assignment = load_assignment(course / "source" / "ps1")
     assert [p.name for p in assignment.notebooks] == ["problem1.ipynb", "problem2.ipynb"]
@@ -225,6 +235,7 @@ def test_numgrade_scores_an_nbgrader_course_as_nbgrader_does(course: Path, tmp_p
     assert {m.name: m.points for m in assignment.manual_cells} == {"explain": 2, "describe": 1}
     expected = _nbgrader_scores(course)
     assert expected == {"alice": 6.0, "bob": 3.0, "carol": 0.0}  # the course works as meant
+    assert _nbgrader_unanswered(course) == {"alice": False, "bob": True, "carol": True}
     got = {}
     with Grader(assignment) as grader:
         for student in STUDENTS:
@@ -237,7 +248,13 @@ def test_numgrade_scores_an_nbgrader_course_as_nbgrader_does(course: Path, tmp_p
             assert HIDDEN_MARK not in page and "squares(10)" not in page
             assert HIDDEN_MARK not in (tmp_path / student / "results.json").read_text()
             assert "problem2.ipynb" in page and "waits for a person" in page
-            assert "3 point(s) wait for a person" in result.output
+            # bob and carol left the written answer as released: 0 and no person, as
+            # nbgrader gives it ("No response"); alice's answer waits for a person
+            explain = next(t for t in result.tests if t.name == "explain")
+            answered = not _nbgrader_unanswered(course)[student]
+            assert explain.kind == ("needs-person" if answered else "missing")
+            assert explain.score == 0.0
+            assert f"{3 if answered else 1} point(s) wait for a person" in result.output
     assert got == expected
 
 
