@@ -153,8 +153,6 @@ def test_feedback_page_works_with_the_keyboard(service: Running, browser: suppor
     stops = tab_through(browser)
     assert stops and stops[0]["href"] == f"/submissions/{graded}", stops
     assert all(s["outline"] for s in stops), stops
-    press_on = browser.run("return document.activeElement.getAttribute('href')")
-    assert press_on is not None
     browser.open(f"{service.url}/submissions/{graded}/feedback")
     press(browser, TAB)
     press(browser, ENTER)
