@@ -8,7 +8,9 @@ confirmation after a regrade, the Canvas ID column, the released notebook.
 
 from __future__ import annotations
 
+import csv
 import datetime as dt
+import io
 import json
 import re
 from pathlib import Path
@@ -260,3 +262,40 @@ def test_the_released_notebook_is_downloaded_without_solutions_or_hidden_checks(
     assert not {line for line in solution if line in text_}
     assert not {line for line in hidden if line in text_}
     assert len(released["cells"]) > 3
+
+
+# -- the Canvas CSV's ID column -------------------------------------------------------------
+
+def test_canvas_csv_fills_id_from_the_roster(tmp_path: Path) -> None:
+    from autograder.errors import UsageError
+    from autograder.service import auth, db, gradebook
+    from autograder.service.course import AssignmentPolicy
+    from autograder.service.standing import standing
+
+    roster = tmp_path / "roster.csv"
+    roster.write_text("id,name,email,canvas_id\nalice,Alice,a@x.edu,104321\nbob,Bob,b@x.edu,\n")
+    engine = db.make_engine(f"sqlite:///{tmp_path / 'db.sqlite3'}")
+    db.upgrade(engine)  # the migrations, 0005_pages among them
+    factory = db.sessions(engine)
+    with factory.begin() as session:
+        auth.import_roster(session, auth.read_roster(roster))
+    policy = AssignmentPolicy("hull", "hull", "Convex hull", dt.datetime(2020, 1, 1),
+                              dt.datetime(2020, 2, 1))
+    with factory() as session:
+        rows = [(user, standing(session, policy, user.id))
+                for user in session.scalars(db_select_users()).all()]
+        canvas = list(csv.reader(io.StringIO(gradebook.canvas_csv(policy, rows))))
+    engine.dispose()
+    assert canvas[0][:3] == ["Student", "ID", "SIS User ID"]
+    assert {row[2]: row[1] for row in canvas[2:]} == {"alice": "104321", "bob": ""}
+    roster.write_text("id,name,email,canvas_id\nalice,Alice,a@x.edu,alice@canvas\n")
+    with pytest.raises(UsageError, match="line 2: canvas_id is Canvas's numeric user id"):
+        auth.read_roster(roster)
+
+
+def db_select_users():
+    from sqlalchemy import select
+
+    from autograder.service.models import User
+
+    return select(User).order_by(User.id)
