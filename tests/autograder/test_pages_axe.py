@@ -8,8 +8,6 @@ per-student table linking to each feedback page.
 
 from __future__ import annotations
 
-import subprocess
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -17,33 +15,26 @@ import pytest
 from autograder.results.feedback import write_feedback
 from autograder.results.model import Attachment, CheckResult, SubmissionResult
 from autograder.results.summary import write_summary
+from tests.autograder import test_browser
 from tests.autograder.test_browser import HOSTILE, _car_png
 from tests.support import axe
-from tests.support.webdriver import CHROMEDRIVER, CHROMIUM, WebDriver, start_chromedriver
+from tests.support.webdriver import WebDriver
 
 pytestmark = pytest.mark.browser
 
 MESSAGE = "Your car's rear wheel is 4% off the reference at x = 3.2."
 
 
+#: the feedback-page tests' headless Chromium (a module-scoped fixture)
+browser = test_browser.browser
+
+
 @pytest.fixture(scope="module")
-def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[WebDriver, str]]:
-    if not (CHROMIUM and CHROMEDRIVER):
-        pytest.skip("headless Chromium is not installed: apt-get install chromium chromium-driver "
-                    "(.ci/run does this in CI)")
+def axe_js() -> str:
     script = axe.axe_script()
     if script is None:
         pytest.skip(axe.skip_reason())
-    driver, web = start_chromedriver(tmp_path_factory.mktemp("chromedriver"))
-    try:
-        yield web, script
-    finally:
-        web.quit()
-        driver.terminate()
-        try:
-            driver.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            driver.kill()
+    return script
 
 
 def _result(folder: Path, sid: str, wheel: float) -> SubmissionResult:
@@ -74,18 +65,16 @@ def batch(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def test_feedback_and_summary_pass_axe_and_fit_a_phone(browser: tuple[WebDriver, str],
+def test_feedback_and_summary_pass_axe_and_fit_a_phone(browser: WebDriver, axe_js: str,
                                                        batch: Path) -> None:
-    web, script = browser
     problems = []
     for page in (batch / "alice" / "feedback.html", batch / "summary.html"):
-        problems += axe.page_problems(web, script, page.as_uri())
+        problems += axe.page_problems(browser, axe_js, page.as_uri())
     assert not problems, "\n".join(problems)
 
 
-def test_the_car_fits_and_says_what_the_check_found(browser: tuple[WebDriver, str],
-                                                    batch: Path) -> None:
-    web, _ = browser
+def test_the_car_fits_and_says_what_the_check_found(browser: WebDriver, batch: Path) -> None:
+    web = browser
     web.resize(360, 800)
     web.open((batch / "alice" / "feedback.html").as_uri())
     pictures = web.run("return [...document.images].map(i => ({alt: i.alt, "
@@ -95,8 +84,8 @@ def test_the_car_fits_and_says_what_the_check_found(browser: tuple[WebDriver, st
     assert pictures[0]["right"] <= web.run("return window.innerWidth")
 
 
-def test_summary_lists_every_student_with_a_link(browser: tuple[WebDriver, str], batch: Path) -> None:
-    web, _ = browser
+def test_summary_lists_every_student_with_a_link(browser: WebDriver, batch: Path) -> None:
+    web = browser
     web.open((batch / "summary.html").as_uri())
     rows = web.run("return [...document.querySelectorAll('#students tbody tr')].map(r => "
                    "({text: r.innerText, href: r.querySelector('a').getAttribute('href')}))")

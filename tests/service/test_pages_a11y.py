@@ -129,13 +129,18 @@ def tab_through(web: support.WebDriver, limit: int = 40) -> list[dict]:
     return seen
 
 
+def tab_through_page(web: support.WebDriver, service: Running, url: str) -> list[dict]:
+    """alice's page ``url`` on a phone, tabbed through from the top."""
+    as_user(web, service, "alice")
+    web.resize(360, 800)
+    web.open(url)
+    return tab_through(web)
+
+
 @pytest.mark.browser
 def test_upload_page_works_with_the_keyboard(service: Running, browser: support.WebDriver,
                                              graded: int) -> None:
-    as_user(browser, service, "alice")
-    browser.resize(360, 800)
-    browser.open(f"{service.url}/assignments/hull")
-    stops = tab_through(browser)
+    stops = tab_through_page(browser, service, f"{service.url}/assignments/hull")
     assert stops[0]["href"] == "#main" and "Skip" in stops[0]["text"], stops[:2]
     ids = [s["id"] for s in stops]
     assert "notebook" in ids and "submit" in ids and "download" in ids, ids
@@ -149,10 +154,7 @@ def test_upload_page_works_with_the_keyboard(service: Running, browser: support.
 @pytest.mark.browser
 def test_feedback_page_works_with_the_keyboard(service: Running, browser: support.WebDriver,
                                                graded: int) -> None:
-    as_user(browser, service, "alice")
-    browser.resize(360, 800)
-    browser.open(f"{service.url}/submissions/{graded}/feedback")
-    stops = tab_through(browser)
+    stops = tab_through_page(browser, service, f"{service.url}/submissions/{graded}/feedback")
     assert stops and stops[0]["href"] == f"/submissions/{graded}", stops
     assert all(s["outline"] for s in stops), stops
     browser.open(f"{service.url}/submissions/{graded}/feedback")
