@@ -187,7 +187,11 @@ async def submit(request: Request, name: str, who: SignedIn, policy: Assignment,
 
 @router.get("/assignments/{name}/notebook")
 async def released(who: SignedIn, policy: Assignment, svc: ServiceState) -> Response:
-    """The released notebook (solutions and hidden checks cut out by ``autograder release``)."""
+    """The released notebook (solutions and hidden checks cut out by ``autograder release``),
+    for students once the assignment opens."""
+    if not who.staff and utcnow() < policy.opens:
+        raise HTTPException(403, f"{policy.title} opens {policy.opens:%Y-%m-%d %H:%M} UTC; "
+                                 "its notebook can be downloaded from then on.")
     try:
         path = await run_in_threadpool(released_notebook, policy, svc.course.data_dir)
     except (UsageError, subprocess.TimeoutExpired) as exc:

@@ -266,6 +266,17 @@ def test_the_released_notebook_is_downloaded_without_solutions_or_hidden_checks(
     assert len(released["cells"]) > 3
 
 
+def test_the_notebook_of_an_assignment_not_yet_open_is_not_given_to_students(
+        service: Running) -> None:
+    with httpx.Client(base_url=service.url, timeout=600) as client:
+        early = client.get("/assignments/later/notebook",
+                           headers={"Authorization": f"Bearer {service.tokens['alice']}"})
+        assert early.status_code == 403 and "opens 2099-01-01 00:00 UTC" in early.text
+        staff = client.get("/assignments/later/notebook",
+                           headers={"Authorization": f"Bearer {service.tokens['prof']}"})
+        assert staff.status_code == 200 and "BEGIN SOLUTION" not in staff.text
+
+
 # -- the Canvas CSV's ID column -------------------------------------------------------------
 
 def test_canvas_csv_fills_id_from_the_roster(tmp_path: Path) -> None:
