@@ -128,6 +128,29 @@ class Elsewhere:
 
 
 @dataclass(frozen=True)
+class StudentRow:
+    """One submission's line in the per-student table: its id links to its feedback page."""
+
+    id: str
+    outcome: str
+    score: float
+    max_score: float
+    passed: int
+    checks: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"id": self.id, "outcome": self.outcome, "score": self.score,
+                "max_score": self.max_score, "passed": self.passed, "checks": self.checks}
+
+
+def student_rows(results: Sequence[SubmissionResult]) -> tuple[StudentRow, ...]:
+    """A row per submission, in id order."""
+    return tuple(StudentRow(r.id, r.outcome, r.score, r.max_score,
+                            sum(1 for t in r.tests if t.max_score and t.score >= t.max_score),
+                            len(r.tests)) for r in sorted(results, key=lambda r: r.id))
+
+
+@dataclass(frozen=True)
 class ClassSummary:
     """Everything ``summary.json`` and ``summary.html`` say about a batch.
 
@@ -150,6 +173,8 @@ class ClassSummary:
     no_longer_submitted: tuple[Elsewhere, ...] = ()
     #: results another file of this run claims the id of (neither is exported)
     conflicts: tuple[Elsewhere, ...] = ()
+    #: one row per submission, for the per-student table
+    students: tuple[StudentRow, ...] = ()
 
     @property
     def mean_percent(self) -> float | None:
@@ -175,6 +200,7 @@ class ClassSummary:
             "attention": [a.to_dict() for a in self.attention],
             "conflicts": [c.to_dict() for c in self.conflicts],
             "no_longer_submitted": [g.to_dict() for g in self.no_longer_submitted],
+            "students": [row.to_dict() for row in self.students],
             "hard_coding_rule": HARD_CODING_RULE,
         }
 
@@ -286,7 +312,7 @@ def summarise(results: Sequence[SubmissionResult], *, assignment: str = "",
         mean_seconds=statistics.fmean(seconds) if seconds else None,
         total_seconds=sum(seconds), attention=needs_attention(results),
         no_longer_submitted=tuple(e for e in elsewhere if not e.claimed_by),
-        conflicts=tuple(e for e in elsewhere if e.claimed_by))
+        conflicts=tuple(e for e in elsewhere if e.claimed_by), students=student_rows(results))
 
 
 # -- the page -------------------------------------------------------------------

@@ -96,10 +96,11 @@ class RosterEntry:
     name: str
     email: str
     role: str
+    canvas_id: str = ""
 
 
 def read_roster(path: Path) -> list[RosterEntry]:
-    """Rows of a roster CSV with columns ``id, name, email`` (and optionally ``role``)."""
+    """Rows of a roster CSV with columns ``id, name, email`` (and optionally ``role``, ``canvas_id``)."""
     try:
         text = Path(path).read_text(encoding="utf-8-sig")
     except OSError as exc:
@@ -117,8 +118,12 @@ def read_roster(path: Path) -> list[RosterEntry]:
             raise UsageError(f"{path}, line {line}: every row needs an id (at most 128 characters).")
         if role not in ROLES:
             raise UsageError(f"{path}, line {line}: role must be one of {', '.join(ROLES)}; got {role!r}.")
+        canvas_id = (row.get("canvas_id") or "").strip()
+        if canvas_id and (not canvas_id.isdigit() or len(canvas_id) > 32):
+            raise UsageError(f"{path}, line {line}: canvas_id is Canvas's numeric user id "
+                             f"(People > the student > the number in the address); got {canvas_id!r}.")
         entries.append(RosterEntry(sid, (row.get("name") or "").strip(),
-                                   (row.get("email") or "").strip(), role))
+                                   (row.get("email") or "").strip(), role, canvas_id))
     ids = [e.id for e in entries]
     if len(set(ids)) != len(ids):
         raise UsageError(f"{path}: ids must be unique in the roster.")
@@ -146,11 +151,13 @@ def import_roster(session: Session, entries: Iterable[RosterEntry]) -> RosterCha
     for entry in entries:
         user = session.get(User, entry.id)
         if user is None:
-            user = User(id=entry.id, name=entry.name, email=entry.email, role=entry.role)
+            user = User(id=entry.id, name=entry.name, email=entry.email, role=entry.role,
+                        canvas_id=entry.canvas_id)
             session.add(user)
             added.append(entry.id)
         else:
             user.name, user.email, user.role = entry.name, entry.email, entry.role
+            user.canvas_id = entry.canvas_id
             already.append(entry.id)
         if user.token_hash is None:
             token = new_token()

@@ -49,8 +49,9 @@ def grades_csv(rows: Sequence[tuple[User, Standing]]) -> str:
 def canvas_csv(policy: AssignmentPolicy, rows: Sequence[tuple[User, Standing]]) -> str:
     """Canvas's gradebook import layout: Student, ID, SIS User ID, SIS Login ID, Section, <assignment>.
 
-    Canvas matches rows on ``SIS User ID`` (the roster id here) and reads the
-    "Points Possible" row; students without a counted attempt get an empty cell.
+    Canvas matches rows on ``ID`` (Canvas's user id, from the roster's optional
+    ``canvas_id`` column) or else on ``SIS User ID`` (the roster id here), and reads
+    the "Points Possible" row; students without a counted attempt get an empty cell.
     """
     max_score = next((s.max_score for _, s in rows if s.max_score is not None), None)
     buffer = io.StringIO()
@@ -59,7 +60,8 @@ def canvas_csv(policy: AssignmentPolicy, rows: Sequence[tuple[User, Standing]]) 
     writer.writerow(["Student", "ID", "SIS User ID", "SIS Login ID", "Section", column])
     writer.writerow(["Points Possible", "", "", "", "", _num(max_score)])
     for user, stand in rows:
-        writer.writerow([user.name or user.id, "", user.id, user.email, "", _num(stand.score)])
+        writer.writerow([user.name or user.id, user.canvas_id, user.id, user.email, "",
+                         _num(stand.score)])
     return buffer.getvalue()
 
 

@@ -27,6 +27,8 @@ class User(Base):
     name: Mapped[str] = mapped_column(String(256), default="")
     email: Mapped[str] = mapped_column(String(256), default="")
     role: Mapped[str] = mapped_column(String(16), default="student")  # student | ta | instructor
+    #: Canvas's own user id (the roster's optional ``canvas_id`` column): the Canvas CSV's "ID"
+    canvas_id: Mapped[str] = mapped_column(String(32), default="", server_default="")
     #: SHA-256 of the access token (tokens are 192 random bits, so a fast hash suffices)
     token_hash: Mapped[str | None] = mapped_column(String(64), unique=True, nullable=True)
 

@@ -21,6 +21,7 @@ from autograder.results.feedback import FEEDBACK_NAME
 from autograder.results.summary import render_summary, summarise
 from autograder.service import auth, gradebook, jobqueue
 from autograder.service.models import Extension, Job, Submission, User
+from autograder.service.pages_student import with_way_back
 from autograder.service.standing import class_standings, final_score, standing
 from autograder.service.web import (
     Assignment,
@@ -38,7 +39,8 @@ router = APIRouter()
 # -- reading: teaching assistants and instructors -----------------------------------------
 
 @router.get("/instructor")
-def instructor_home(who: StaffMember, svc: ServiceState) -> Response:
+def instructor_home(who: StaffMember, svc: ServiceState, regrade: int | None = None,
+                    assignment: str = "") -> Response:
     with svc.factory() as session:
         tables = [(p, class_standings(session, svc.course, p)) for p in svc.course.assignments]
         failed = session.execute(
@@ -48,8 +50,11 @@ def instructor_home(who: StaffMember, svc: ServiceState) -> Response:
         waiting = dict(session.execute(
             select(Submission.assignment, func.count()).join(Job, Job.submission_id == Submission.id)
             .where(Job.state.in_(("queued", "running"))).group_by(Submission.assignment)).all())
+    # the confirmation after "Regrade every submission" (the redirect says how many)
+    regraded_title = next((p.title for p in svc.course.assignments if p.name == assignment),
+                          "the assignment")
     return svc.page("instructor.html.j2", who, tables=tables, failed=failed, waiting=waiting,
-                    final_score=final_score)
+                    final_score=final_score, regraded=regrade, regraded_title=regraded_title)
 
 
 @router.get("/instructor/students/{user_id}")
@@ -66,7 +71,8 @@ def instructor_student(user_id: str, who: StaffMember, svc: ServiceState) -> Res
 def summary(name: str, who: StaffMember, policy: Assignment, svc: ServiceState) -> Response:
     with svc.factory() as session:
         results = gradebook.counted_results(class_standings(session, svc.course, policy))
-    return sandboxed(render_summary(summarise(results, assignment=name), title=policy.title))
+    page = sandboxed(render_summary(summarise(results, assignment=name), title=policy.title))
+    return with_way_back(page, "/instructor", "Back to the class")
 
 
 @router.get("/instructor/{name}/summary/{user_id}/" + FEEDBACK_NAME)
@@ -76,7 +82,7 @@ def summary_feedback(user_id: str, who: StaffMember, policy: Assignment,
         stand = standing(session, policy, user_id)
     if stand.counted is None:
         raise HTTPException(404, "This student has no graded attempt.")
-    return svc.feedback_file(stand.counted)
+    return with_way_back(svc.feedback_file(stand.counted), "../", "Back to the class summary")
 
 
 @router.get("/instructor/{name}/export/{kind}")
@@ -156,7 +162,8 @@ async def regrade(request: Request, name: str, who: Instructor, svc: ServiceStat
     count = await run_in_threadpool(_queue_regrades, svc.factory, name)
     if wants_json(request, who):
         return JSONResponse({"queued": count})
-    return RedirectResponse(f"/instructor?regrade={count}#{quote(name)}", status_code=303)
+    return RedirectResponse(f"/instructor?regrade={count}&assignment={quote(name)}#{quote(name)}",
+                            status_code=303)
 
 
 def _issue_tokens(factory: sessionmaker[Session], everyone: bool) -> str:

@@ -7,19 +7,24 @@ answers the same 404 as an id that does not exist.
 
 from __future__ import annotations
 
+import datetime as dt
 import secrets
+import subprocess
+from html import escape
 
 from fastapi import APIRouter, HTTPException, Request
-from fastapi.responses import JSONResponse, RedirectResponse, Response
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
-from autograder.errors import UploadRejected
+from autograder.errors import UploadRejected, UsageError
 from autograder.service import auth
 from autograder.service.api_routes import submission_view
 from autograder.service.course import AssignmentPolicy
 from autograder.service.intake import accept, precheck
-from autograder.service.models import utcnow
+from autograder.service.models import Submission, utcnow
+from autograder.service.released import released_notebook
 from autograder.service.standing import final_score, standing, time_left
 from autograder.service.web import (
     LOGIN_COOKIE,
@@ -120,6 +125,21 @@ async def logout(request: Request, who: SignedIn, svc: ServiceState) -> Response
 
 # -- assignments and uploads -------------------------------------------------------------
 
+def _amount(seconds: float) -> str:
+    """"3 days", "2 hours", "5 minutes", "less than a minute" (rounded down)."""
+    for size, unit in ((86400, "day"), (3600, "hour"), (60, "minute")):
+        if seconds >= size:
+            count = int(seconds // size)
+            return f"{count} {unit}{'s' if count > 1 else ''}"
+    return "less than a minute"
+
+
+def deadline_words(deadline: dt.datetime, now: dt.datetime) -> str:
+    """"in 3 days" before ``deadline``, "passed 2 hours ago" after it."""
+    seconds = (deadline - now).total_seconds()
+    return f"in {_amount(seconds)}" if seconds > 0 else f"passed {_amount(-seconds)} ago"
+
+
 @router.get("/assignments")
 def assignments(who: SignedIn, svc: ServiceState) -> Response:
     now = utcnow()
@@ -135,7 +155,7 @@ def _assignment_page(svc: Service, who: Who, policy: AssignmentPolicy, *, status
     with svc.factory() as session:
         stand = standing(session, policy, who.id)
     return svc.page("assignment.html.j2", who, status=status, s=stand, error=error,
-                    final_score=final_score, left=time_left(stand.deadline, now),
+                    final_score=final_score, left=deadline_words(stand.deadline, now),
                     is_open=stand.is_open(now), max_bytes=svc.course.max_upload_bytes)
 
 
@@ -165,6 +185,20 @@ async def submit(request: Request, name: str, who: SignedIn, policy: Assignment,
     return RedirectResponse(f"/submissions/{sub.id}", status_code=303)
 
 
+@router.get("/assignments/{name}/notebook")
+async def released(who: SignedIn, policy: Assignment, svc: ServiceState) -> Response:
+    """The released notebook (solutions and hidden checks cut out by ``autograder release``),
+    for students once the assignment opens."""
+    if not who.staff and utcnow() < policy.opens:
+        raise HTTPException(403, f"{policy.title} opens {policy.opens:%Y-%m-%d %H:%M} UTC; "
+                                 "its notebook can be downloaded from then on.")
+    try:
+        path = await run_in_threadpool(released_notebook, policy, svc.course.data_dir)
+    except (UsageError, subprocess.TimeoutExpired) as exc:
+        raise HTTPException(503, f"{exc} Tell your instructor; try again later.") from None
+    return FileResponse(path, media_type="application/x-ipynb+json", filename=path.name)
+
+
 def _rejected(request: Request, svc: Service, who: Who, policy: AssignmentPolicy,
               exc: UploadRejected) -> Response:
     headers = {"Retry-After": str(exc.retry_after)} if exc.retry_after else {}
@@ -177,13 +211,39 @@ def _rejected(request: Request, svc: Service, who: Who, policy: AssignmentPolicy
 
 # -- an attempt ---------------------------------------------------------------------------
 
+def attempt_number(session: Session, sub: Submission) -> int:
+    """The student's count of uploads to this assignment up to ``sub``: 1 is their first.
+
+    Computed from the order of upload (ids grow with time), never shown as the
+    database id, which counts everyone's uploads.
+    """
+    return int(session.scalar(select(func.count()).select_from(Submission).where(
+        Submission.user_id == sub.user_id, Submission.assignment == sub.assignment,
+        Submission.id <= sub.id)) or 0)
+
+
 @router.get("/submissions/{sub_id}")
 def submission_page(mine: MySubmission, svc: ServiceState) -> Response:
     policy = svc.policy(mine.sub.assignment)
+    with svc.factory() as session:
+        number = attempt_number(session, mine.sub)
     return svc.page("submission.html.j2", mine.who, sub=mine.sub, view=submission_view(mine.sub),
-                    policy=policy)
+                    policy=policy, number=number)
+
+
+def with_way_back(page: Response, href: str, text: str) -> Response:
+    """``page`` (a feedback or summary page the service did not write itself) with a link
+    back at the top of its ``<main>``; the page's own text is escaped, so the first
+    ``<main>`` is the template's."""
+    link = f'<main>\n<nav aria-label="Back"><p><a href="{escape(href)}">{escape(text)}</a></p></nav>'
+    body = bytes(page.body).decode("utf-8").replace("<main>", link, 1)
+    return HTMLResponse(body, status_code=page.status_code, headers={
+        k: v for k, v in page.headers.items() if k.lower() != "content-length"})
 
 
 @router.get("/submissions/{sub_id}/feedback")
 def feedback(mine: MySubmission, svc: ServiceState) -> Response:
-    return svc.feedback_file(mine.sub)
+    with svc.factory() as session:
+        number = attempt_number(session, mine.sub)
+    return with_way_back(svc.feedback_file(mine.sub), f"/submissions/{mine.sub.id}",
+                         f"Back to attempt {number}")

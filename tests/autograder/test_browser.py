@@ -111,8 +111,10 @@ def test_feedback_page_shows_score_checks_and_both_cars(
     for check in result.tests:
         assert check.name in seen["text"]
     assert "Your car's rear wheel is 4% off the reference." in seen["text"]
-    cars = {i["alt"]: i for i in seen["imgs"]}
+    cars = {i["alt"].split(":")[0]: i for i in seen["imgs"]}
     assert set(cars) == {"your car", "the reference car"}, "hidden checks must not show pictures"
+    # the text alternative says what the check found, not just "figure"
+    assert all("rear wheel is 4% off" in i["alt"] for i in seen["imgs"])
     for image in cars.values():
         assert image["complete"] and image["w"] > 0 and image["h"] > 0, image
         assert image["src"].startswith("data:image/png;base64")
