@@ -51,6 +51,10 @@ _REASONS = (
     ("Signature has expired", 400, "The launch has expired (its exp claim is in the past)."),
     ("Signature verification failed", 403, "The launch's signature does not match the "
                                            "platform's published keys."),
+    ("[client_id=", 403, "The launch is for a client id (audience, aud) this tool has no "
+                         "registration for."),
+    ("not found in settings", 403, "The launch comes from an issuer this tool has no "
+                                   "registration for."),
     ("Client id not registered", 403, "The launch is for a client id (audience, aud) this tool "
                                       "has no registration for."),
     ("Registration not found", 403, "The launch comes from an issuer this tool has no "
