@@ -146,7 +146,12 @@ def _launch(svc: Service, lti: LtiRequest) -> Response:
         cookie = auth.open_session(session, user)
     note = _roster(svc, message, claims["iss"]) if person.role == "instructor" else ""
     target = f"/assignments/{policy.name}" if person.role == "student" else "/instructor"
-    response = RedirectResponse(target + (f"?lti={note}" if note else ""), status_code=303)
+    return _signed_in(svc, target + (f"?lti={note}" if note else ""), cookie)
+
+
+def _signed_in(svc: Service, target: str, cookie: str) -> Response:
+    """Go to ``target`` with the browser session the launch opened (as the token sign-in sets it)."""
+    response = RedirectResponse(target, status_code=303)
     response.set_cookie(SESSION_COOKIE, cookie, httponly=True, samesite="lax", path="/",
                         max_age=int(svc.course.session_lifetime.total_seconds()))
     return response
@@ -190,10 +195,7 @@ def _deep_link_chooser(svc: Service, claims: Mapping[str, Any], person: Any) -> 
     with svc.factory.begin() as session:
         user = account_user(session, claims["iss"], person)
         cookie = auth.open_session(session, user)
-    response = RedirectResponse(f"/lti/deep-link/{ticket}", status_code=303)
-    response.set_cookie(SESSION_COOKIE, cookie, httponly=True, samesite="lax", path="/",
-                        max_age=int(svc.course.session_lifetime.total_seconds()))
-    return response
+    return _signed_in(svc, f"/lti/deep-link/{ticket}", cookie)
 
 
 def _deep_link_claims(svc: Service, ticket: str) -> dict[str, Any]:
