@@ -25,6 +25,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from autograder.service import api_routes, pages_staff, pages_student
 from autograder.service.bounds import BodyLimit
 from autograder.service.course import Course
+from autograder.service.lti import routes as lti
 from autograder.service.storage import Storage
 from autograder.service.web import HERE, NeedSignIn, Service, http_error, need_sign_in, security_headers
 
@@ -42,6 +43,6 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
     app.middleware("http")(security_headers)
     app.add_exception_handler(NeedSignIn, need_sign_in)
     app.add_exception_handler(HTTPException, http_error)
-    for router in (pages_student.router, api_routes.router, pages_staff.router):
+    for router in (pages_student.router, api_routes.router, pages_staff.router, lti.router):
         app.include_router(router)
     return app

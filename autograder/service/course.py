@@ -75,6 +75,8 @@ class Course:
     #: how long a browser session lasts after sign-in
     session_lifetime: dt.timedelta = dt.timedelta(hours=SESSION_HOURS)
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
+    #: the LMS registrations this service is an LTI 1.3 tool of (``[[lti.platforms]]``)
+    lti_platforms: tuple["LtiPlatform", ...] = ()
 
     def assignment(self, name: str) -> AssignmentPolicy | None:
         return next((a for a in self.assignments if a.name == name), None)
@@ -97,10 +99,10 @@ def load_course(path: str | Path) -> Course:
         config = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise UsageError(f"{path}: not valid TOML: {exc}") from None
-    unknown = set(config) - {"course", "auth", "assignment"}
+    unknown = set(config) - {"course", "auth", "assignment", "lti"}
     if unknown:
         raise UsageError(f"{path}: unknown table(s) {sorted(unknown)}; expected [course], "
-                         "[auth] and [[assignment]].")
+                         "[auth], [[assignment]] and [[lti.platforms]].")
     course = _table(path, config, "course", _COURSE_KEYS)
     auth = _table(path, config, "auth", _AUTH_KEYS)
     zone = _zone(path, course.get("timezone", "UTC"))
@@ -127,7 +129,51 @@ def load_course(path: str | Path) -> Course:
         trusted_header=auth.get("trusted_header") or None,
         trusted_proxies=tuple(auth.get("trusted_proxies", ("127.0.0.1", "::1"))),
         session_lifetime=_hours(path, "auth", "session_hours", auth.get("session_hours", SESSION_HOURS)),
+        lti_platforms=_lti_platforms(path, config.get("lti", {})),
     )
+
+
+@dataclass(frozen=True)
+class LtiPlatform:
+    """One LMS registration of the tool (PyLTI1p3's names); see docs/lti.md."""
+
+    issuer: str
+    client_id: str
+    deployment_ids: tuple[str, ...]
+    auth_login_url: str
+    auth_token_url: str
+    key_set_url: str
+
+
+_LTI_KEYS = ("issuer", "client_id", "deployment_ids", "auth_login_url", "auth_token_url",
+             "key_set_url")
+
+
+def _lti_platforms(path: Path, lti: Any) -> tuple[LtiPlatform, ...]:
+    """``[[lti.platforms]]``: every key required, deployment ids a non-empty list of strings."""
+    if not isinstance(lti, dict) or set(lti) - {"platforms"}:
+        raise UsageError(f"{path}: [lti] holds only [[lti.platforms]] tables.")
+    platforms = []
+    for i, item in enumerate(lti.get("platforms", [])):
+        where = f"[[lti.platforms]] #{i + 1}"
+        if not isinstance(item, dict) or set(item) != set(_LTI_KEYS):
+            raise UsageError(f"{path}: {where} needs exactly the keys {', '.join(_LTI_KEYS)}"
+                             + (f"; unknown or missing: {sorted(set(item) ^ set(_LTI_KEYS))}."
+                                if isinstance(item, dict) else "."))
+        ids = item["deployment_ids"]
+        if not isinstance(ids, list) or not ids or not all(isinstance(d, str) and d for d in ids):
+            raise UsageError(f"{path}: {where} deployment_ids must be a list of the LMS's "
+                             f"deployment ids (strings); got {ids!r}.")
+        for key in _LTI_KEYS[:2] + _LTI_KEYS[3:]:
+            if not isinstance(item[key], str) or not item[key]:
+                raise UsageError(f"{path}: {where} {key} must be a non-empty string.")
+        platforms.append(LtiPlatform(item["issuer"], item["client_id"], tuple(ids),
+                                     item["auth_login_url"], item["auth_token_url"],
+                                     item["key_set_url"]))
+    pairs = [(p.issuer, p.client_id) for p in platforms]
+    if len(set(pairs)) != len(pairs):
+        raise UsageError(f"{path}: two [[lti.platforms]] have the same issuer and client_id.")
+    return tuple(platforms)
 
 
 def _table(path: Path, config: dict[str, Any], name: str, keys: set[str]) -> dict[str, Any]:

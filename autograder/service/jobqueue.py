@@ -20,6 +20,7 @@ from sqlalchemy import select, text, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.results.model import SubmissionResult
+from autograder.service.lti.outbox import note_graded
 from autograder.service.models import Grading, Job, Submission, utcnow
 
 #: seconds a claim lasts without renewal; a grader renews it every third of that
@@ -110,6 +111,7 @@ def finish(factory: sessionmaker[Session], job: Claimed, result: SubmissionResul
         submission.score, submission.max_score = result.score, result.max_score
         submission.result_json = json.dumps(result.to_dict())
         submission.result_dir, submission.graded_at = result_dir, now
+        note_graded(session, submission)  # the LMS's score, in the same transaction (LTI AGS)
         return "done"
 
 

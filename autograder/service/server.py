@@ -18,6 +18,7 @@ from autograder.runners.jobs import DaskSpec
 from autograder.service import auth
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions, upgrade
+from autograder.service.lti.outbox import ScoreSender
 from autograder.service.models import User
 from autograder.service.pool import GradingPool
 from autograder.service.settings import GraderSettings
@@ -126,6 +127,8 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
                               dask=spec, **({"lease_seconds": lease_seconds} if lease_seconds else {}))
     pool = GradingPool(settings, 1 if spec is not None else jobs or max(1, (os.cpu_count() or 2)))
     pool.start()
+    scores = ScoreSender(course, factory)  # LTI: scores to the LMS, pending ones first
+    scores.start()
     if say:
         graders = (f"{pool.jobs} grading process(es)" if spec is None
                    else f"grading on the Dask cluster {spec.address}")
@@ -135,5 +138,6 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
         uvicorn.run(create_app(course, factory, secret=_secret(course)), host=host, port=port,
                     log_level="warning", access_log=False)
     finally:
+        scores.stop()
         pool.stop()
         engine.dispose()
