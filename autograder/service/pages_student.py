@@ -135,7 +135,7 @@ def _assignment_page(svc: Service, who: Who, policy: AssignmentPolicy, *, status
     with svc.factory() as session:
         stand = standing(session, policy, who.id)
     return svc.page("assignment.html.j2", who, status=status, s=stand, error=error,
-                    final_score=final_score, left=time_left(stand.deadline, now),
+                    final_score=stand.final, left=time_left(stand.deadline, now),
                     is_open=stand.is_open(now), max_bytes=svc.course.max_upload_bytes)
 
 
