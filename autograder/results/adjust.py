@@ -50,7 +50,8 @@ def clamp(points: float, max_score: float) -> float:
 
 
 def _marked(check: CheckResult, mark: ManualMark) -> CheckResult:
-    return replace(check, score=clamp(mark.points, check.max_score), kind=PERSON,
+    score = clamp(mark.points, check.max_score)
+    return replace(check, score=score, kind="ok" if score >= check.max_score else PERSON,
                    output=mark.to_text())
 
 

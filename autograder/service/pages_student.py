@@ -20,6 +20,7 @@ from autograder.service.api_routes import submission_view
 from autograder.service.course import AssignmentPolicy
 from autograder.service.intake import accept, precheck
 from autograder.service.models import utcnow
+from autograder.service.pages_review import people_context
 from autograder.service.standing import final_score, standing, time_left
 from autograder.service.web import (
     LOGIN_COOKIE,
@@ -180,8 +181,10 @@ def _rejected(request: Request, svc: Service, who: Who, policy: AssignmentPolicy
 @router.get("/submissions/{sub_id}")
 def submission_page(mine: MySubmission, svc: ServiceState) -> Response:
     policy = svc.policy(mine.sub.assignment)
-    return svc.page("submission.html.j2", mine.who, sub=mine.sub, view=submission_view(mine.sub),
-                    policy=policy)
+    with svc.factory() as session:  # released manual grading, overrides, regrade requests
+        people = people_context(session, mine.sub, staff=False)
+    return svc.page("submission.html.j2", mine.who, sub=mine.sub,
+                    view=submission_view(mine.sub, people["raw"]), policy=policy, **people)
 
 
 @router.get("/submissions/{sub_id}/feedback")

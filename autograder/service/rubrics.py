@@ -17,7 +17,7 @@ from typing import Iterable, Mapping, Sequence
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from autograder.results.adjust import ManualMark, ScoreOverride, adjust
+from autograder.results.adjust import ManualMark, ScoreOverride, adjust, clamp
 from autograder.results.model import SubmissionResult
 from autograder.service.manual_models import AnswerGrade, AppliedItem, Override, Release, RubricItem
 from autograder.service.models import Submission, utcnow
@@ -94,6 +94,11 @@ def marks_for(session: Session, ids: Iterable[int]) -> dict[tuple[int, str], Man
 
 
 # -- changing ----------------------------------------------------------------------------
+
+def clamp_points(mark: ManualMark, max_score: float) -> float:
+    """The points an answer gets: its items' sum, between 0 and the question's points."""
+    return clamp(mark.points, max_score)
+
 
 def items(session: Session, assignment: str, question: str) -> list[RubricItem]:
     return list(session.scalars(select(RubricItem).where(
