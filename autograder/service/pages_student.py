@@ -21,7 +21,7 @@ from autograder.service.course import AssignmentPolicy
 from autograder.service.intake import accept, precheck
 from autograder.service.models import utcnow
 from autograder.service.pages_review import people_context
-from autograder.service.standing import final_score, standing, time_left
+from autograder.service.standing import standing, time_left
 from autograder.service.web import (
     LOGIN_COOKIE,
     SESSION_COOKIE,
