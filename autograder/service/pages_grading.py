@@ -158,7 +158,8 @@ def _item(session: Session, policy: AssignmentPolicy, question: str, item_id: in
     return item
 
 
-async def _form(request: Request, who: Who) -> Any:
+async def small_form(request: Request, who: Who) -> Any:
+    """A short form (no files), after its CSRF check."""
     form = await request.form(max_files=0, max_fields=10, max_part_size=16 * 1024)
     check_csrf(who, form, request)
     return form
@@ -167,7 +168,7 @@ async def _form(request: Request, who: Who) -> Any:
 @router.post("/instructor/{name}/grading/{question}/items")
 async def add_item(request: Request, question: str, who: StaffMember, policy: Assignment,
                    svc: ServiceState) -> Response:
-    form = await _form(request, who)
+    form = await small_form(request, who)
     text, points = _text(form, "text", required=True, what="the item's text"), _points(form)
 
     def add(factory: sessionmaker[Session]) -> None:
@@ -182,7 +183,7 @@ async def add_item(request: Request, question: str, who: StaffMember, policy: As
 @router.post("/instructor/{name}/grading/{question}/items/{item_id}")
 async def edit_item(request: Request, question: str, item_id: int, who: StaffMember,
                     policy: Assignment, svc: ServiceState) -> Response:
-    form = await _form(request, who)
+    form = await small_form(request, who)
     text, points = _text(form, "text", required=True, what="the item's text"), _points(form)
 
     def edit(factory: sessionmaker[Session]) -> None:
@@ -196,7 +197,7 @@ async def edit_item(request: Request, question: str, item_id: int, who: StaffMem
 @router.post("/instructor/{name}/grading/{question}/{sub_id}/apply/{item_id}")
 async def apply_item(request: Request, question: str, sub_id: int, item_id: int,
                      who: StaffMember, policy: Assignment, svc: ServiceState) -> Response:
-    form = await _form(request, who)
+    form = await small_form(request, who)
 
     def toggle(factory: sessionmaker[Session]) -> None:
         with factory.begin() as session:
@@ -210,7 +211,7 @@ async def apply_item(request: Request, question: str, sub_id: int, item_id: int,
 @router.post("/instructor/{name}/grading/{question}/{sub_id}/comment")
 async def comment(request: Request, question: str, sub_id: int, who: StaffMember,
                   policy: Assignment, svc: ServiceState) -> Response:
-    form = await _form(request, who)
+    form = await small_form(request, who)
     text = _text(form, "comment", required=False, what="the comment")
 
     def save(factory: sessionmaker[Session]) -> None:
@@ -224,7 +225,7 @@ async def comment(request: Request, question: str, sub_id: int, who: StaffMember
 @router.post("/instructor/{name}/grading/release")
 async def release(request: Request, who: StaffMember, policy: Assignment,
                   svc: ServiceState) -> Response:
-    form = await _form(request, who)
+    form = await small_form(request, who)
     question = str(form.get("question", ""))
 
     def save(factory: sessionmaker[Session]) -> None:
@@ -236,4 +237,4 @@ async def release(request: Request, who: StaffMember, policy: Assignment,
     return RedirectResponse(f"/instructor/{policy.name}/grading", status_code=303)
 
 
-__all__ = ["Question", "questions", "router"]
+__all__ = ["Question", "questions", "router", "small_form"]

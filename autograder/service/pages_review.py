@@ -21,7 +21,8 @@ from starlette.concurrency import run_in_threadpool
 from autograder.service import jobqueue, regrades, rubrics
 from autograder.service.manual_models import RegradeRequest
 from autograder.service.models import Job, Submission
-from autograder.service.web import Instructor, MySubmission, Service, ServiceState, StaffMember, Who, check_csrf
+from autograder.service.pages_grading import small_form
+from autograder.service.web import Instructor, MySubmission, Service, ServiceState, StaffMember, Who
 
 router = APIRouter()
 
@@ -35,12 +36,6 @@ def people_context(session: Session, sub: Submission, *, staff: bool) -> dict[st
     return {"result": result, "marks": marks, "history": rubrics.history(session, sub.id),
             "threads": regrades.threads(session, sub.id), "checks": regrades.check_names(sub),
             "raw": people.raw_score(sub)}
-
-
-async def _form(request: Request, who: Who) -> Any:
-    form = await request.form(max_files=0, max_fields=10, max_part_size=16 * 1024)
-    check_csrf(who, form, request)
-    return form
 
 
 def _message(form: Any, key: str = "message") -> str:
@@ -62,6 +57,12 @@ def _check(sub: Submission, form: Any) -> str:
 
 # -- staff ---------------------------------------------------------------------------------
 
+def _waiting(session: Session, sub_id: int) -> bool:
+    """Whether a grading of the attempt is queued or running."""
+    return session.scalar(select(Job.id).where(
+        Job.submission_id == sub_id, Job.state.in_(("queued", "running"))).limit(1)) is not None
+
+
 def _staff_sub(svc: Service, session: Session, who: Who, sub_id: int) -> Submission:
     return svc.submission(session, who, sub_id)
 
@@ -71,22 +72,19 @@ def staff_submission(sub_id: int, who: StaffMember, svc: ServiceState) -> Respon
     with svc.factory() as session:
         sub = _staff_sub(svc, session, who, sub_id)
         context = people_context(session, sub, staff=True)
-        waiting = session.scalar(select(Job.id).where(
-            Job.submission_id == sub.id, Job.state.in_(("queued", "running"))).limit(1))
+        waiting = _waiting(session, sub.id)
     return svc.page("review.html.j2", who, sub=sub, policy=svc.policy(sub.assignment),
-                    waiting=waiting is not None, **context)
+                    waiting=waiting, **context)
 
 
 @router.post("/instructor/submissions/{sub_id}/regrade")
 async def regrade_one(request: Request, sub_id: int, who: Instructor, svc: ServiceState) -> Response:
-    await _form(request, who)
+    await small_form(request, who)
 
     def queue(factory: sessionmaker[Session]) -> None:
         with factory.begin() as session:
             sub = _staff_sub(svc, session, who, sub_id)
-            waiting = session.scalar(select(Job.id).where(
-                Job.submission_id == sub.id, Job.state.in_(("queued", "running"))).limit(1))
-            if waiting is None:  # one grading at a time: a second click changes nothing
+            if not _waiting(session, sub.id):  # one grading at a time: a second click changes nothing
                 jobqueue.enqueue(session, sub.id, kind="regrade")
     await run_in_threadpool(queue, svc.factory)
     return RedirectResponse(f"/instructor/submissions/{sub_id}", status_code=303)
@@ -108,7 +106,7 @@ def _score(form: Any) -> float | None:
 
 @router.post("/instructor/submissions/{sub_id}/override")
 async def override(request: Request, sub_id: int, who: Instructor, svc: ServiceState) -> Response:
-    form = await _form(request, who)
+    form = await small_form(request, who)
     score = _score(form)
     reason = str(form.get("reason", "")).strip()
     if not reason:
@@ -135,7 +133,7 @@ def staff_requests(who: StaffMember, svc: ServiceState) -> Response:
 
 @router.post("/submissions/{sub_id}/regrade-requests")
 async def ask(request: Request, mine: MySubmission, svc: ServiceState) -> Response:
-    form = await _form(request, mine.who)
+    form = await small_form(request, mine.who)
     text = _message(form)
 
     def save(factory: sessionmaker[Session]) -> None:
@@ -151,7 +149,7 @@ async def ask(request: Request, mine: MySubmission, svc: ServiceState) -> Respon
 @router.post("/submissions/{sub_id}/regrade-requests/{request_id}")
 async def answer(request: Request, request_id: int, mine: MySubmission,
                  svc: ServiceState) -> Response:
-    form = await _form(request, mine.who)
+    form = await small_form(request, mine.who)
     text = _message(form)
 
     def save(factory: sessionmaker[Session]) -> None:

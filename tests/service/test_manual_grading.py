@@ -13,6 +13,7 @@ import io
 import os
 import re
 import shutil
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Callable
@@ -200,6 +201,17 @@ def _through_http(sub_id: int, staff: httpx.Client, staff_csrf: str, student: ht
         assert row["score"] == "4"
         summary = prof.get("/instructor/essay/summary/").text
         assert re.search(r'id="mean">100(\.0)?%<', summary), summary  # 4 of 4: the combined score
+
+        # one attempt regraded: its score stays meanwhile and people's grading survives it
+        again = prof.post(f"/instructor/submissions/{sub_id}/regrade", data={"csrf": prof_csrf})
+        assert again.status_code == 303, again.text
+        assert student.get(f"/api/submissions/{sub_id}").json()["score"] == 4
+        for _ in range(1200):  # a generous bound: the test fails rather than hangs
+            if 'a grading is waiting' not in prof.get(f"/instructor/submissions/{sub_id}").text:
+                break
+            time.sleep(0.5)
+        view = student.get(f"/api/submissions/{sub_id}").json()
+        assert view["status"] == "graded" and view["score"] == 4, view
 
 
 def test_a_forged_or_foreign_grading_request_changes_nothing(
