@@ -49,6 +49,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import nbformat
+
 import autograder
 from autograder.engine.celltests import CellTest, ManualCell
 from autograder.engine.forbidden import Rules
@@ -278,10 +280,10 @@ def _read_toml(path: Path) -> dict[str, Any]:
 
 
 def _check_keys(path: Path, config: dict[str, Any]) -> None:
-    unknown = sorted(set(config) - set(_ALLOWED))
+    unknown = sorted(set(config) - set(_ALLOWED) - {"manual"})  # [[manual]]: see _manual_cells
     if unknown:
         raise AssignmentError(f"{path}: unknown table(s) {_listed(unknown)}; "
-                              f"allowed tables: {_listed(_ALLOWED)}.")
+                              f"allowed tables: {_listed([*_ALLOWED, 'manual'])}.")
     for table, allowed in _ALLOWED.items():
         section = config.get(table, {})
         if not isinstance(section, dict):
@@ -354,6 +356,8 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
     extra: dict[str, Any] = {"requirements": requirements}
     if otter is not None:
         extra["cell_tests"] = otter[0]
+    if parts is None and "manual" in config:
+        extra["manual_cells"] = _manual_cells(toml_path, config["manual"], notebook)
     if parts is not None:
         extra.update({"notebooks": parts.notebooks, "cell_tests": parts.cell_tests,
                       "manual_cells": parts.manual_cells,
@@ -364,6 +368,40 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
         "notebook_timeout": timeouts["notebook_timeout"],
         "call_timeout": timeouts["call_timeout"], "limits": limits,
         "checks_digest": checks_digest(root), **extra})
+
+
+def _manual_cells(toml_path: Path, entries: Any, notebook: Path) -> tuple[ManualCell, ...]:
+    """``[[manual]] cell = "NAME"  points = N``: the notebook's cell tagged ``manual:NAME``."""
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise AssignmentError(f"{toml_path}: write each manually graded cell as a [[manual]] "
+                              "table with cell = \"NAME\" and points = N.")
+    tags = _manual_tags(notebook)
+    found = []
+    for number, entry in enumerate(entries, start=1):
+        cell, points = entry.get("cell"), entry.get("points")
+        if set(entry) - {"cell", "points"}:
+            raise AssignmentError(f"{toml_path}: [[manual]] number {number} has unknown key(s) "
+                                  f"{_listed(sorted(set(entry) - {'cell', 'points'}))}; "
+                                  "allowed: 'cell', 'points'.")
+        if not isinstance(cell, str) or not cell or isinstance(points, bool) \
+                or not isinstance(points, (int, float)) or points <= 0:
+            raise AssignmentError(f"{toml_path}: [[manual]] number {number} needs cell = \"NAME\" "
+                                  f"and points = a positive number; got {entry!r}.")
+        if cell not in tags:
+            raise AssignmentError(f"{toml_path}: [[manual]] cell {cell!r} has no cell in "
+                                  f"{notebook.name}; tag the answer cell manual:{cell}.")
+        found.append(ManualCell(name=cell, notebook=notebook.name, points=float(points)))
+    return tuple(found)
+
+
+def _manual_tags(notebook: Path) -> set[str]:
+    try:
+        book = nbformat.read(str(notebook), as_version=4)
+    except Exception:  # nbformat raises several kinds for a damaged file
+        raise AssignmentError(f"The instructor notebook {notebook} cannot be read; open it in "
+                              "Jupyter and save it again.") from None
+    return {t[len("manual:"):] for c in book.cells for t in c.get("metadata", {}).get("tags", [])
+            if isinstance(t, str) and t.startswith("manual:")}
 
 
 def _name(root: Path, toml_path: Path, config: dict[str, Any]) -> str:

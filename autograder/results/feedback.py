@@ -56,6 +56,7 @@ KIND_LABELS = {
     "crashed": "your code stopped the worker", "forbidden": "uses something not allowed",
     "check-error": "the check could not use your answer",
     "needs-person": "waits for a person",
+    "graded-by-person": "graded by a person", "override": "set by the instructor",
 }
 
 

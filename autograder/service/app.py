@@ -22,7 +22,7 @@ from fastapi import FastAPI, HTTPException
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy.orm import Session, sessionmaker
 
-from autograder.service import api_routes, pages_staff, pages_student
+from autograder.service import api_routes, pages_grading, pages_review, pages_staff, pages_student
 from autograder.service.bounds import BodyLimit
 from autograder.service.course import Course
 from autograder.service.lti import routes as lti
@@ -43,6 +43,7 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
     app.middleware("http")(security_headers)
     app.add_exception_handler(NeedSignIn, need_sign_in)
     app.add_exception_handler(HTTPException, http_error)
-    for router in (pages_student.router, api_routes.router, pages_staff.router, lti.router):
+    for router in (pages_student.router, api_routes.router, pages_review.router,
+                   pages_grading.router, pages_staff.router, lti.router):
         app.include_router(router)
     return app

@@ -23,8 +23,9 @@ def counted_results(rows: Sequence[tuple[User, Standing]]) -> list[SubmissionRes
     """The counted attempt's result of every student who has one, with the roster id as id."""
     results = []
     for user, stand in rows:
-        if stand.counted is not None and stand.counted.result_json:
-            result = SubmissionResult.from_dict(json.loads(stand.counted.result_json))
+        # people's grading (released manual points, overrides) folded in, as in the score
+        result = None if stand.counted is None else stand.people.result(stand.counted)
+        if result is not None:
             results.append(result.__class__(**{**result.__dict__, "id": user.id}))
     return results
 
@@ -38,7 +39,7 @@ def grades_csv(rows: Sequence[tuple[User, Standing]]) -> str:
     for user, stand in rows:
         sub = stand.counted
         writer.writerow([user.id, user.name, user.email, len(stand.attempts),
-                         _num(sub.score if sub else None), _num(stand.max_score),
+                         _num(stand.raw_score), _num(stand.max_score),
                          sub.late_days if sub else "", _num(sub.penalty if sub else None),
                          _num(stand.score), (sub.outcome if sub else
                                              ("pending" if stand.pending else "missing")),

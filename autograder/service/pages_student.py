@@ -24,8 +24,9 @@ from autograder.service.api_routes import submission_view
 from autograder.service.course import AssignmentPolicy
 from autograder.service.intake import accept, precheck
 from autograder.service.models import Submission, utcnow
+from autograder.service.pages_review import people_context
 from autograder.service.released import released_notebook
-from autograder.service.standing import final_score, standing, time_left
+from autograder.service.standing import standing, time_left
 from autograder.service.web import (
     LOGIN_COOKIE,
     SESSION_COOKIE,
@@ -155,7 +156,7 @@ def _assignment_page(svc: Service, who: Who, policy: AssignmentPolicy, *, status
     with svc.factory() as session:
         stand = standing(session, policy, who.id)
     return svc.page("assignment.html.j2", who, status=status, s=stand, error=error,
-                    final_score=final_score, left=deadline_words(stand.deadline, now),
+                    final_score=stand.final, left=deadline_words(stand.deadline, now),
                     is_open=stand.is_open(now), max_bytes=svc.course.max_upload_bytes)
 
 
@@ -225,10 +226,12 @@ def attempt_number(session: Session, sub: Submission) -> int:
 @router.get("/submissions/{sub_id}")
 def submission_page(mine: MySubmission, svc: ServiceState) -> Response:
     policy = svc.policy(mine.sub.assignment)
-    with svc.factory() as session:
+    with svc.factory() as session:  # released manual grading, overrides, regrade requests
         number = attempt_number(session, mine.sub)
-    return svc.page("submission.html.j2", mine.who, sub=mine.sub, view=submission_view(mine.sub),
-                    policy=policy, number=number)
+        people = people_context(session, mine.sub, staff=False)
+    return svc.page("submission.html.j2", mine.who, sub=mine.sub,
+                    view=submission_view(mine.sub, people["raw"]), policy=policy, number=number,
+                    **people)
 
 
 def with_way_back(page: Response, href: str, text: str) -> Response:

@@ -3,26 +3,29 @@
 Only graded attempts count; an attempt whose grading failed (outcome "error")
 never shows as a zero. With ``count = "last"`` the newest graded attempt
 counts, with ``"best"`` the one with the highest score after its late penalty.
+Scores include people's grading once released and instructors' overrides
+(:mod:`~autograder.service.rubrics`), so the LMS gets the same score as every export.
 """
 
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from autograder.service import rubrics
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Extension, Submission, User
 
 
-def final_score(submission: Submission) -> float | None:
-    """The score after the late penalty (``None`` until graded)."""
+def final_score(submission: Submission, raw: float | None = None) -> float | None:
+    """The score after the late penalty (``None`` until graded); ``raw``: the combined score."""
     if submission.status != "graded" or submission.score is None:
         return None
-    return round(submission.score * (1.0 - submission.penalty), 6)
+    return round((submission.score if raw is None else raw) * (1.0 - submission.penalty), 6)
 
 
 @dataclass(frozen=True)
@@ -32,6 +35,16 @@ class Standing:
     closes: dt.datetime
     attempts: tuple[Submission, ...]  # newest first
     counted: Submission | None
+    #: people's grading of the attempts (manual points, overrides)
+    people: rubrics.Adjustments = field(default_factory=rubrics.Adjustments)
+
+    def final(self, sub: Submission) -> float | None:
+        """An attempt's score after its late penalty, with people's grading in."""
+        return final_score(sub, self.people.raw_score(sub))
+
+    @property
+    def raw_score(self) -> float | None:
+        return None if self.counted is None else self.people.raw_score(self.counted)
 
     @property
     def pending(self) -> int:
@@ -39,7 +52,7 @@ class Standing:
 
     @property
     def score(self) -> float | None:
-        return None if self.counted is None else final_score(self.counted)
+        return None if self.counted is None else self.final(self.counted)
 
     @property
     def max_score(self) -> float | None:
@@ -49,13 +62,22 @@ class Standing:
         return self.policy.opens <= now < self.closes
 
 
-def counted(policy: AssignmentPolicy, attempts: Sequence[Submission]) -> Submission | None:
+def counted(policy: AssignmentPolicy, attempts: Sequence[Submission],
+            people: rubrics.Adjustments | None = None) -> Submission | None:
     graded = [s for s in attempts if s.status == "graded" and s.score is not None]
     if not graded:
         return None
     if policy.count == "last":
         return max(graded, key=lambda s: (s.submitted_at, s.id))
-    return max(graded, key=lambda s: (final_score(s) or 0.0, s.submitted_at, s.id))
+    people = people or rubrics.Adjustments()
+    return max(graded, key=lambda s: (final_score(s, people.raw_score(s)) or 0.0,
+                                      s.submitted_at, s.id))
+
+
+def _standing(policy: AssignmentPolicy, deadline: dt.datetime, attempts: tuple[Submission, ...],
+              people: rubrics.Adjustments) -> Standing:
+    return Standing(policy=policy, deadline=deadline, closes=policy.closes_for(deadline),
+                    attempts=attempts, counted=counted(policy, attempts, people), people=people)
 
 
 def deadline_for(session: Session, policy: AssignmentPolicy, user_id: str) -> dt.datetime:
@@ -69,8 +91,7 @@ def standing(session: Session, policy: AssignmentPolicy, user_id: str) -> Standi
         select(Submission).where(Submission.user_id == user_id,
                                  Submission.assignment == policy.name)
         .order_by(Submission.submitted_at.desc(), Submission.id.desc())))
-    return Standing(policy=policy, deadline=deadline, closes=policy.closes_for(deadline),
-                    attempts=attempts, counted=counted(policy, attempts))
+    return _standing(policy, deadline, attempts, rubrics.load(session, attempts))
 
 
 def class_standings(session: Session, course: Course, policy: AssignmentPolicy
@@ -80,15 +101,16 @@ def class_standings(session: Session, course: Course, policy: AssignmentPolicy
     extensions = {e.user_id: e.deadline for e in session.scalars(
         select(Extension).where(Extension.assignment == policy.name))}
     by_user: dict[str, list[Submission]] = {}
-    for sub in session.scalars(select(Submission).where(Submission.assignment == policy.name)
-                               .order_by(Submission.submitted_at.desc(), Submission.id.desc())):
+    subs = session.scalars(select(Submission).where(Submission.assignment == policy.name)
+                           .order_by(Submission.submitted_at.desc(), Submission.id.desc())).all()
+    for sub in subs:
         by_user.setdefault(sub.user_id, []).append(sub)
+    people = rubrics.load(session, subs)
     rows = []
     for user in users:
         deadline = policy.deadline_for(user.id, extensions.get(user.id))
         attempts = tuple(by_user.get(user.id, ()))
-        rows.append((user, Standing(policy, deadline, policy.closes_for(deadline), attempts,
-                                    counted(policy, attempts))))
+        rows.append((user, _standing(policy, deadline, attempts, people)))
     return rows
 
 

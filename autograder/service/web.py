@@ -27,8 +27,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from starlette.concurrency import run_in_threadpool
 
 from autograder.errors import UploadRejected
-from autograder.results.feedback import FEEDBACK_NAME
-from autograder.service import auth, throttle
+from autograder.results.feedback import FEEDBACK_NAME, render_feedback
+from autograder.service import auth, rubrics, throttle
 from autograder.service.bounds import RequestTooLarge
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
@@ -137,10 +137,21 @@ class Service:
         return sub
 
     def feedback_file(self, sub: Submission) -> Response:
-        """The feedback page of a graded attempt, sandboxed; 404 while it is being graded."""
+        """The feedback page of a graded attempt, sandboxed; 404 while it is being graded.
+
+        When people graded it (released manual points, overrides) the page is made
+        again from the result with their grading in, else the grader's file is served.
+        """
         folder = self.storage.resolve_result(sub.result_dir) if sub.result_dir else None
         if sub.status != "graded" or folder is None or not (folder / FEEDBACK_NAME).is_file():
             raise HTTPException(404, "This attempt has no feedback yet; it is still being graded.")
+        with self.factory() as session:
+            people = rubrics.load(session, [sub])
+        result = people.result(sub) if people.touches(sub.id) else None
+        if result is not None:
+            policy = self.course.assignment(sub.assignment)
+            return sandboxed(render_feedback(folder, result,
+                                             title=policy.title if policy else None))
         return sandboxed((folder / FEEDBACK_NAME).read_text(encoding="utf-8"))
 
 

@@ -1,14 +1,14 @@
 """roster: the Canvas user id of each person (the "ID" column of the Canvas CSV)
 
 Revision ID: 0005_pages
-Revises: 0003_lti
+Revises: 0004_manual
 Create Date: 2026-12-03 16:30:00
 """
 import sqlalchemy as sa
 from alembic import op
 
 revision = '0005_pages'
-down_revision = '0003_lti'
+down_revision = '0004_manual'
 branch_labels = None
 depends_on = None
 
