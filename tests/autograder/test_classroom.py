@@ -111,7 +111,8 @@ def test_roster_command_imports_classroom_roster_and_names_the_unlinked(tmp_path
     (tmp_path / "roster.csv").write_text("id,name,email,role\nteacher,T,t@uni.example,instructor\n")
     course = tmp_path / "course.toml"
     course.write_text('[course]\nname = "Classroom course"\nroster = "roster.csv"\ndata = "data"\n'
-                      '[[assignment]]\nname = "hull"\ndeadline = 2030-01-01T00:00:00Z\n')
+                      '[[assignment]]\nname = "hull"\nopens = 2020-01-01T00:00:00Z\n'
+                      'deadline = 2030-01-01T00:00:00Z\n')
     roster = tmp_path / "classroom_roster.csv"
     roster.write_text(CLASSROOM_ROSTER)
     tokens = tmp_path / "tokens.csv"
