@@ -147,10 +147,12 @@ def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
           options: GradingOptions | None = None,
-          started_slot: GradingSlot | None = None) -> SubmissionResult:
+          started_slot: GradingSlot | None = None,
+          out_dir: Path | None = None) -> SubmissionResult:
     """Run the public checks on one notebook, as a student does before submitting.
 
-    ``started_slot``: as for :func:`grade`.
+    ``started_slot``: as for :func:`grade`. ``out_dir``, when given, receives the result
+    folder (the feedback page and its pictures).
     """
     notebook = Path(notebook)
     found = resolve_assignment(assignment) if assignment is not None else _guess(notebook)
@@ -159,7 +161,7 @@ def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
                           call_timeout=base.call_timeout, public_only=True,
                           max_notebook_bytes=base.max_notebook_bytes)
     with Grader(found, opts, started_slot=started_slot) as grader:
-        return grader.grade(notebook)
+        return grader.grade(notebook, out_dir=None if out_dir is None else Path(out_dir))
 
 
 def _guess(notebook: Path) -> Assignment:
