@@ -14,19 +14,19 @@ import pytest
 from autograder import api
 
 ROOT = Path(__file__).resolve().parents[2]
-EXAMPLES = ROOT / "assignments" / "hull" / "examples"
 
 pytestmark = pytest.mark.slow
 
 
-def released(tmp_path: Path, example: str, *cells: str) -> Path:
-    """The release of hull with ``example``'s answers saved as the student's notebook,
-    then ``cells`` appended (what the student types at the end)."""
-    folder = tmp_path / "hull"
-    api.release("hull", out=folder)
-    nb = nbformat.read(EXAMPLES / f"{example}.ipynb", as_version=4)
+def released(tmp_path: Path, example: str, *cells: str, assignment: str = "hull") -> Path:
+    """The release of ``assignment`` with ``example``'s answers saved as the student's
+    notebook, then ``cells`` appended (what the student types at the end)."""
+    folder = tmp_path / assignment
+    api.release(assignment, out=folder)
+    nb = nbformat.read(ROOT / "assignments" / assignment / "examples" / f"{example}.ipynb",
+                       as_version=4)
     nb.cells += [nbformat.v4.new_code_cell(c) for c in cells]
-    nbformat.write(nb, folder / "hull.ipynb")
+    nbformat.write(nb, folder / f"{assignment}.ipynb")
     return folder
 
 
@@ -36,7 +36,7 @@ def run(folder: Path, monkeypatch: pytest.MonkeyPatch) -> list[nbformat.Notebook
 
     monkeypatch.setenv("PYTHONPATH", str(ROOT))  # the kernel imports this checkout's numgrade
     monkeypatch.delenv("JPY_SESSION_NAME", raising=False)
-    nb = nbformat.read(folder / "hull.ipynb", as_version=4)
+    nb = nbformat.read(folder / f"{folder.name}.ipynb", as_version=4)
     nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(folder)}}).execute()
     return nb.cells
@@ -59,16 +59,18 @@ def test_check_in_the_notebook_shows_the_public_checks_as_a_table(
     assert all(name in every for name in names)
     assert "autograder.student" not in every and "NameError" not in every  # check() cells: no-ops when graded
     assert "Hidden checks run when your notebook is graded" in every
-    convex = [n for n in names if n.startswith("test_convex_hull")]
+    convex = [n for n in names if n.startswith("convex_hull")]
     assert convex and all(n in one for n in convex)
-    assert not any(n in one for n in names if n.startswith("test_orientation"))
+    assert not any(n in one for n in names if n.startswith("orientation"))
 
 
-def test_check_in_the_notebook_reports_what_is_wrong(tmp_path: Path,
-                                                     monkeypatch: pytest.MonkeyPatch) -> None:
-    folder = released(tmp_path, "wrong-clockwise", "import autograder\nautograder.check()")
+def test_check_in_the_notebook_reports_what_is_wrong_with_the_pictures(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """bezier's public checks attach a picture of the student's curve when it is wrong."""
+    folder = released(tmp_path, "wrong-levels", "import autograder\nautograder.check()",
+                      assignment="bezier")
     page = html_of(run(folder, monkeypatch)[-1])
-    expected = api.check(folder / "hull.ipynb", assignment=folder)
+    expected = api.check(folder / "bezier.ipynb", assignment=folder)
     assert expected.score < expected.max_score
     assert f"{expected.score:g}/{expected.max_score:g} points" in page
     assert 'class="numgrade-failed"' in page or 'class="numgrade-partial"' in page
@@ -84,7 +86,7 @@ def test_check_of_an_unknown_function_says_which_exist(tmp_path: Path,
     with pytest.raises(nbclient.exceptions.CellExecutionError) as raised:
         run(folder, monkeypatch)
     assert "No public check is about 'convex_hul'" in str(raised.value)
-    assert "test_convex_hull" in str(raised.value)
+    assert "convex_hull_small" in str(raised.value)
 
 
 def test_nothing_hidden_is_in_the_release_the_kernel_checks_from(tmp_path: Path) -> None:
