@@ -4,8 +4,6 @@ an HTML table in the cell's output; ``check("convex_hull")`` shows that function
 
 from __future__ import annotations
 
-import os
-import shutil
 from pathlib import Path
 
 import nbformat
