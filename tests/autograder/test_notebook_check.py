@@ -65,7 +65,7 @@ def test_check_in_the_notebook_shows_the_public_checks_as_a_table(
 def test_check_in_the_notebook_reports_what_is_wrong_with_the_pictures(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """bezier's public checks attach a picture of the student's curve when it is wrong."""
-    folder = released(tmp_path, "wrong-levels", "import autograder\nautograder.check()",
+    folder = released(tmp_path, "wrong-split-reversed", "import autograder\nautograder.check()",
                       assignment="bezier")
     page = html_of(run(folder, monkeypatch)[-1])
     expected = api.check(folder / "bezier.ipynb", assignment=folder)
