@@ -68,7 +68,7 @@ def test_check_in_the_notebook_reports_what_is_wrong_with_the_pictures(
     folder = released(tmp_path, "wrong-split-reversed", "import autograder\nautograder.check()",
                       assignment="bezier")
     page = html_of(run(folder, monkeypatch)[-1])
-    expected = api.check(folder / "bezier.ipynb", assignment=folder)
+    expected = api.check(folder / "bezier.ipynb", assignment=folder, out_dir=tmp_path / "result")
     assert expected.score < expected.max_score
     assert f"{expected.score:g}/{expected.max_score:g} points" in page
     assert 'class="numgrade-failed"' in page or 'class="numgrade-partial"' in page
