@@ -147,10 +147,12 @@ def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
           options: GradingOptions | None = None,
-          started_slot: GradingSlot | None = None) -> SubmissionResult:
+          started_slot: GradingSlot | None = None,
+          out_dir: Path | None = None) -> SubmissionResult:
     """Run the public checks on one notebook, as a student does before submitting.
 
-    ``started_slot``: as for :func:`grade`.
+    ``started_slot``: as for :func:`grade`. ``out_dir``, when given, receives the result
+    folder (the feedback page and its pictures).
     """
     notebook = Path(notebook)
     found = resolve_assignment(assignment) if assignment is not None else _guess(notebook)
@@ -162,7 +164,7 @@ def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,
     # in holds the others, each found by its file name (a missing one is named).
     target = notebook.parent if len(found.notebooks) > 1 and notebook.is_file() else notebook
     with Grader(found, opts, started_slot=started_slot) as grader:
-        return grader.grade(target)
+        return grader.grade(target, out_dir=None if out_dir is None else Path(out_dir))
 
 
 def _guess(notebook: Path) -> Assignment:

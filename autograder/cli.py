@@ -204,9 +204,11 @@ def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentPar
                           "tls://HOST:PORT, or tcp://127.0.0.1:PORT (needs numgrade[dask])")
     _cluster_security_options(srv)
 
-    ros = commands.add_parser("roster", help="import a roster CSV (id, name, email[, role]) into a course")
+    ros = commands.add_parser("roster", help="import a roster CSV (id, name, email[, role], or GitHub "
+                                  "Classroom's roster) into a course")
     ros.add_argument("course", type=Path, help="the course TOML file")
-    ros.add_argument("roster", type=Path, help="CSV with columns id, name, email and optionally role")
+    ros.add_argument("roster", type=Path, help="CSV with columns id, name, email and optionally role, or GitHub "
+                     "Classroom's identifier, github_username, github_id, name (id = username)")
     ros.add_argument("--database", default=None, metavar="URL", help="as for `autograder serve`")
     ros.add_argument("--tokens", type=Path, default=None, metavar="FILE",
                      help="the tokens CSV to add the new access tokens to, keeping the tokens already "
@@ -372,6 +374,9 @@ def _roster(args: argparse.Namespace) -> int:
     print(f"New access tokens: {done.new_tokens}, added to {done.tokens} beside the "
           f"{done.kept_tokens} already there (send each person theirs; the database keeps only "
           "hashes)." if done.tokens else "Everyone already had a token; none were made.")
+    if done.unlinked:
+        print(f"Not imported, no GitHub account linked in Classroom yet ({len(done.unlinked)}): "
+              f"{_names(done.unlinked)}; import the roster again once they have accepted.")
     return 0
 
 

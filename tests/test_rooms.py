@@ -41,6 +41,8 @@ MAY_IMPORT: dict[str, frozenset[str]] = {
     "authoring": frozenset({"runners", "engine", "checks", "results", "errors"}),
     "service": frozenset({"runners", "engine", "results", "errors"}),
     "api": frozenset({"authoring", "runners", "engine", "checks", "results", "errors"}),
+    # check() and submit() in a student's notebook: the API's check, the upload client
+    "student": frozenset({"api", "service", "results", "errors"}),
     "cli": frozenset({"api", "service", "authoring", "runners", "engine", "results",
                       "sandbox", "errors"}),
     "__main__": frozenset({"cli"}),

@@ -90,7 +90,8 @@ class Shard:
 
 
 def collect_submissions(paths: Iterable[Path], assignment: str | None = None) -> list[Path]:
-    """The submissions in ``paths``: notebooks, zips, and nbgrader's assignment folders.
+    """The submissions in ``paths``: notebooks, zips, nbgrader's assignment folders and
+    GitHub Classroom's repositories (:func:`classroom_repositories`).
 
     A folder laid out as nbgrader's ``submitted/<student>/<assignment>/`` (a folder named
     ``submitted``, or one with a ``<student>/<assignment>`` folder inside) gives one
@@ -119,6 +120,12 @@ def collect_submissions(paths: Iterable[Path], assignment: str | None = None) ->
 
 
 def _submissions_below(folder: Path, assignment: str | None) -> list[Path]:
+    if "submitted" not in (folder.name, folder.parent.name):  # nbgrader's names come first
+        if folder.parent.name.endswith(CLASSROOM_SUFFIX):
+            return [folder]  # one student's repository of GitHub Classroom's layout
+        repos = classroom_repositories(folder)
+        if repos:
+            return repos + _loose_files(folder)
     if assignment is not None:
         if folder.name == assignment and folder.parent.parent.name == "submitted":
             return [folder]  # submitted/<student>/<assignment>/ itself
@@ -149,8 +156,57 @@ def _files_below(folder: Path, assignment: str | None = None) -> list[Path]:
             subdirs.remove("submitted")
             found += _submissions_below(Path(directory, "submitted"), assignment)
         subdirs[:] = sorted(d for d in subdirs if d not in IGNORED_FOLDERS)
+        for name in [d for d in subdirs if d.endswith(CLASSROOM_SUFFIX)]:
+            subdirs.remove(name)  # GitHub Classroom's folder further down
+            found += _submissions_below(Path(directory, name), assignment)
         found += [Path(directory, name) for name in sorted(files) if _is_submission(name)]
     return found
+
+
+#: the suffix of the folder ``gh classroom clone student-repos`` clones into
+CLASSROOM_SUFFIX = "-submissions"
+
+
+def is_repository(folder: Path) -> bool:
+    """True for a git working tree (a ``.git`` folder, or the ``.git`` file of a worktree)."""
+    return folder.is_dir() and not folder.is_symlink() and os.path.lexists(folder / ".git")
+
+
+def classroom_repositories(folder: Path) -> list[Path]:
+    """The student repositories of GitHub Classroom's layout in ``folder``, else ``[]``.
+
+    ``gh classroom clone student-repos`` clones every accepted assignment into
+    ``<slug>-submissions/<slug>-<username>/`` (the repository's name; see
+    github/gh-classroom, ``clone/student-repos``). A folder is read that way when its
+    name ends in ``-submissions`` or one of its folders is a git repository; then each
+    of its folders (repository or not: a download without ``.git``) is one submission.
+    """
+    if not folder.is_dir() or folder.is_symlink():
+        return []
+    subdirs = [d for d in sorted(folder.iterdir())
+               if d.is_dir() and not d.is_symlink() and d.name not in IGNORED_FOLDERS]
+    if folder.name.endswith(CLASSROOM_SUFFIX) or any(is_repository(d) for d in subdirs):
+        return subdirs
+    return []
+
+
+def classroom_username(repo: Path) -> str:
+    """The username in a Classroom repository's folder name ``<slug>-<username>``.
+
+    The slug comes from the folder the repositories were cloned into
+    (``<slug>-submissions``); otherwise it is the longest prefix ending in ``-`` shared
+    by all the repositories beside it (GitHub usernames never hold ``--``, a slug may
+    hold ``-``). A folder the prefix does not fit keeps its whole name.
+    """
+    parent = repo.parent
+    if parent.name.endswith(CLASSROOM_SUFFIX) and len(parent.name) > len(CLASSROOM_SUFFIX):
+        prefix = parent.name[:-len(CLASSROOM_SUFFIX)] + "-"
+    else:
+        siblings = [d.name for d in parent.iterdir() if d.is_dir() and is_repository(d)]
+        shared = os.path.commonprefix(siblings) if len(siblings) > 1 else ""
+        prefix = shared[:shared.rfind("-") + 1]
+    name = repo.name
+    return name[len(prefix):] if prefix and name.startswith(prefix) and name != prefix else name
 
 
 #: the characters an id keeps as they are; every other is written ``~XX`` (UTF-8, hex)
@@ -176,7 +232,8 @@ def escape_id(name: str) -> str:
 
 
 def place_name(path: Path) -> str:
-    """The name a submission's place gives it: ``<student>`` in nbgrader's layout, else the stem.
+    """The name a submission's place gives it: ``<student>`` in nbgrader's layout, the
+    username in GitHub Classroom's (:func:`classroom_username`), else the stem.
 
     nbgrader keeps submissions as ``submitted/<student>/<assignment>/<notebook>.ipynb``;
     the student's folder is what an LMS roster knows, whether one file, one
@@ -187,6 +244,8 @@ def place_name(path: Path) -> str:
         return parts[-3]
     if path.is_dir() and len(parts) >= 3 and parts[-3] == "submitted":
         return parts[-2]
+    if path.is_dir() and (is_repository(path) or path.parent.name.endswith(CLASSROOM_SUFFIX)):
+        return classroom_username(path)
     if path.is_dir() and len(parts) >= 2:
         return parts[-2]  # <student>/<assignment>/ outside a folder named submitted
     return path.stem

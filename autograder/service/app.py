@@ -9,7 +9,8 @@ signed-in user, so changing an id in a URL finds nothing that is not theirs
 (the answer is the same 404 as for an id that does not exist).
 
 The routes live in :mod:`~autograder.service.pages_student`,
-:mod:`~autograder.service.pages_staff` and :mod:`~autograder.service.api_routes`;
+:mod:`~autograder.service.pages_staff`, :mod:`~autograder.service.api_routes` and
+:mod:`~autograder.service.install` (the student's wheel);
 what they share (the user and course dependencies, CSRF, error pages) in
 :mod:`~autograder.service.web`. This module only assembles them.
 """
@@ -22,7 +23,14 @@ from fastapi import FastAPI, HTTPException
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy.orm import Session, sessionmaker
 
-from autograder.service import api_routes, pages_grading, pages_review, pages_staff, pages_student
+from autograder.service import (
+    api_routes,
+    install,
+    pages_grading,
+    pages_review,
+    pages_staff,
+    pages_student,
+)
 from autograder.service.bounds import BodyLimit
 from autograder.service.course import Course
 from autograder.service.lti import routes as lti
@@ -44,6 +52,7 @@ def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes 
     app.add_exception_handler(NeedSignIn, need_sign_in)
     app.add_exception_handler(HTTPException, http_error)
     for router in (pages_student.router, api_routes.router, pages_review.router,
-                   pages_grading.router, pages_staff.router, lti.router):
+                   pages_grading.router, pages_staff.router, lti.router,
+                   install.router):
         app.include_router(router)
     return app

@@ -10,7 +10,7 @@ import io
 import secrets
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Iterator
 
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
@@ -99,17 +99,59 @@ class RosterEntry:
     canvas_id: str = ""
 
 
-def read_roster(path: Path) -> list[RosterEntry]:
-    """Rows of a roster CSV with columns ``id, name, email`` (and optionally ``role``, ``canvas_id``)."""
+#: the header of GitHub Classroom's roster download
+CLASSROOM_COLUMNS = ("identifier", "github_username", "github_id", "name")
+
+
+def _roster_text(path: Path) -> str:
     try:
-        text = Path(path).read_text(encoding="utf-8-sig")
+        return Path(path).read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise UsageError(f"Cannot read the roster {str(path)!r}: {exc.strerror}.") from None
-    reader = csv.DictReader(io.StringIO(text))
+
+
+def is_classroom_roster(fields: Iterable[str] | None) -> bool:
+    """True for GitHub Classroom's roster CSV (``identifier, github_username, ...``)."""
+    return {"identifier", "github_username"} <= set(fields or ()) and "id" not in set(fields or ())
+
+
+def unlinked_rows(path: Path) -> tuple[str, ...]:
+    """The identifiers of a Classroom roster's rows with no GitHub account linked yet."""
+    reader = csv.DictReader(io.StringIO(_roster_text(path)))
+    if not is_classroom_roster(reader.fieldnames):
+        return ()
+    return tuple((row.get("identifier") or "").strip() for row in reader
+                 if not (row.get("github_username") or "").strip())
+
+
+def _from_classroom(rows: Iterable[dict[str, str]]) -> Iterator[dict[str, str]]:
+    """Classroom's rows as ours: the GitHub username is the id (the repositories are named
+    by it, so grades and uploads meet); an identifier with ``@`` is the email. Rows with no
+    account linked are left out (:func:`unlinked_rows` lists them)."""
+    for row in rows:
+        username = (row.get("github_username") or "").strip()
+        identifier = (row.get("identifier") or "").strip()
+        if username:
+            yield {"id": username, "name": (row.get("name") or "").strip() or identifier,
+                   "email": identifier if "@" in identifier else "", "role": "student"}
+
+
+def read_roster(path: Path) -> list[RosterEntry]:
+    """Rows of a roster CSV with columns ``id, name, email`` (and optionally ``role``,
+    ``canvas_id``), or
+    GitHub Classroom's roster (``identifier, github_username, github_id, name``)."""
+    reader = csv.DictReader(io.StringIO(_roster_text(path)))
+    if is_classroom_roster(reader.fieldnames):
+        return _entries(path, _from_classroom(reader))
     missing = {"id", "name", "email"} - set(reader.fieldnames or ())
     if missing:
         raise UsageError(f"{path}: the roster needs the columns id, name, email (and optionally "
-                         f"role); missing {sorted(missing)}.")
+                         f"role), or GitHub Classroom's {', '.join(CLASSROOM_COLUMNS)}; "
+                         f"missing {sorted(missing)}.")
+    return _entries(path, reader)
+
+
+def _entries(path: Path, reader: Iterable[dict[str, str]]) -> list[RosterEntry]:
     entries: list[RosterEntry] = []
     for line, row in enumerate(reader, start=2):
         sid = (row.get("id") or "").strip()

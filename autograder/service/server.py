@@ -47,6 +47,8 @@ class RosterImport:
     tokens: Path | None  # the tokens file, when anyone got a new token
     new_tokens: int
     kept_tokens: int  # rows of the earlier tokens file kept beside the new ones
+    #: identifiers of a GitHub Classroom roster's rows with no account linked (not imported)
+    unlinked: tuple[str, ...] = ()
 
 
 def import_roster(course: Course, roster: Path, *, tokens_out: Path | None = None) -> RosterImport:
@@ -59,14 +61,16 @@ def import_roster(course: Course, roster: Path, *, tokens_out: Path | None = Non
     try:
         upgrade(engine)
         entries = auth.read_roster(roster)
+        unlinked = auth.unlinked_rows(roster)
         out = tokens_out or course.data_dir / "tokens.csv"
         with sessions(engine).begin() as session:
             changes = auth.import_roster(session, entries)
             if not changes.issued:
-                return RosterImport(changes.added, changes.already, None, 0, 0)
+                return RosterImport(changes.added, changes.already, None, 0, 0, unlinked)
             kept = auth.kept_tokens(session, _read_text(out), besides=(u.id for u, _ in changes.issued))
             atomic_write_bytes(out, auth.tokens_csv([*kept, *changes.issued]).encode(), mode=0o600)
-        return RosterImport(changes.added, changes.already, out, len(changes.issued), len(kept))
+        return RosterImport(changes.added, changes.already, out, len(changes.issued), len(kept),
+                            unlinked)
     finally:
         engine.dispose()
 
