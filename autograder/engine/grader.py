@@ -339,7 +339,8 @@ class Grader:
         if spec is not None:
             result = with_variant(result, self.assignment.name, spec, self._variant)
         if out_dir is not None:
-            write_submission(out_dir, result, title=self.assignment.title)
+            write_submission(out_dir, result, title=self.assignment.title,
+                             deadline=self.assignment.deadline)
         return result
 
     def _grade_part(self, name: str, path: Path | None, submission: Submission, seed: int,
