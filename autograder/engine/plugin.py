@@ -214,6 +214,9 @@ class GradingPlugin:
     @pytest.fixture
     def variant(self) -> VariantView:
         """The student's variant; a person grades the check when the id has none."""
+        if not self.context.has_variants:
+            raise RuntimeError("The `variant` fixture needs a [variants] table in "
+                               "assignment.toml; this assignment declares none.")
         if self.context.variant is None:
             raise NoVariant("This check needs your own parameters and your id is not on the "
                             "roster of this assignment's variants; a person will grade it.")
