@@ -135,3 +135,19 @@ def test_the_four_levels_before_and_after_the_deadline(levels: support.Server,
                     - dt.timedelta(minutes=1)})
     engine.dispose()
     assert "SECRET-AFTER" in page_text(browser, levels, "ann", ann)
+
+
+def test_gradescope_gets_its_own_visibility_and_cut_outputs() -> None:
+    from autograder.results.feedback import as_students_see
+    from autograder.results.model import CheckResult, SubmissionResult
+
+    checks = tuple(CheckResult(name=level, score=0.0, max_score=1.0, output=f"SECRET {level}",
+                               hidden=True, kind="wrong", level=level, shown_input="x = 21")
+                   for level in ("hidden", "after_deadline", "input", "visible"))
+    result = SubmissionResult(id="ann", source="", assignment="levels", key="", sha256="",
+                              outcome="graded", output="", tests=checks, execution_time=0.0,
+                              seed=0)
+    shown = as_students_see(result, past_deadline=True).to_dict()["tests"]
+    assert [t["visibility"] for t in shown] == ["visible", "after_due_date", "visible", "visible"]
+    assert [("SECRET" in t["output"]) for t in shown] == [False, True, False, True]
+    assert shown[2]["output"] == "Input: x = 21"
