@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Sequence
 
 from autograder.authoring.gradescope import GRADESCOPE_ROOT, gradescope_zip, run_submission
-from autograder.authoring.release import release as _release
+from autograder.authoring.release import release as _release, release_variants
 from autograder.engine.assignment import Assignment, load_assignment
 from autograder.engine.grader import Grader, GradingOptions
 from autograder.engine.slot import GradingSlot
@@ -30,8 +30,15 @@ def resolve_assignment(spec: str | Path | Assignment, *, course: Path | None = N
     return load_assignment(spec, search_root=course) if course is not None else load_assignment(spec)
 
 
-def release(assignment: str | Path | Assignment, *, out: Path) -> Path:
-    """Write the student version of ``assignment`` to ``out``; return the notebook path."""
+def release(assignment: str | Path | Assignment, *, out: Path,
+            variants: Path | None = None) -> Path:
+    """Write the student version of ``assignment`` to ``out``; return the notebook path.
+
+    ``variants``: a roster CSV; one notebook per student is written to
+    ``out/<student>/`` with the student's parameters, and the first is returned.
+    """
+    if variants is not None:
+        return release_variants(resolve_assignment(assignment), Path(variants), Path(out))[0]
     return _release(resolve_assignment(assignment), Path(out))
 
 

@@ -58,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
     rel.add_argument("assignment", help="a folder name under assignments/ or a path to one")
     rel.add_argument("--out", type=Path, required=True, help="folder to write the student version to")
     rel.add_argument("--course", type=Path, default=None, metavar="ROOT", help=_COURSE_HELP)
+    rel.add_argument("--variants", type=Path, default=None, metavar="ROSTER.csv",
+                     help="write one notebook per student of this roster, each with the "
+                          "student's parameters, to OUT/<student>/")
 
     grd = commands.add_parser("grade", help="grade submitted notebooks with every check")
     grd.add_argument("assignment", help="a folder name under assignments/ or a path to one")
@@ -341,7 +344,11 @@ def _validate(args: argparse.Namespace) -> int:
 def _release(args: argparse.Namespace) -> int:
     from autograder import api
 
-    path = api.release(api.resolve_assignment(args.assignment, course=args.course), out=args.out)
+    path = api.release(api.resolve_assignment(args.assignment, course=args.course), out=args.out,
+                       variants=args.variants)
+    if args.variants is not None:
+        print(f"Wrote one student version per student of {args.variants} under {args.out}.")
+        return 0
     print(f"Wrote the student version to {path.parent} (notebook: {path.name}).")
     return 0
 

@@ -121,6 +121,11 @@ class CheckFailure(AssertionError):
     """A check's verdict with a message written for the student."""
 
 
+class NoVariant(CheckFailure):
+    """A check needs the student's variant and the student id has none (not on the roster):
+    a person decides, the check is not scored zero."""
+
+
 class PartialCredit(CheckFailure):
     """Ends a check as failed with ``fraction`` of its points and a message."""
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import nbformat
 
 import autograder
+from autograder.results.feedback import as_students_see
 from autograder.engine.assignment import Assignment, load_assignment
 from autograder.engine.grader import Grader, error_result
 from autograder.errors import UsageError
@@ -184,5 +185,7 @@ def run_submission(root: Path) -> "SubmissionResult":
             result = error_result(found, notebook, student, exc)
     if note:
         result = dataclasses.replace(result, output=f"{note} {result.output}")
-    write_gradescope_result(out, result)
+    # Gradescope itself holds back "after_due_date" checks until the due date; the
+    # "hidden" and "input" levels are cut here, since Gradescope shows every output it gets.
+    write_gradescope_result(out, as_students_see(result, past_deadline=True))
     return result

@@ -23,7 +23,9 @@ import copy
 import hashlib
 import json
 import logging
+import re
 import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +34,7 @@ import nbformat
 from autograder.authoring.otter_release import otter_template, verify_no_hidden_tests
 from autograder.engine.assignment import Assignment
 from autograder.engine.otter_format import is_otter_notebook
+from autograder.engine.variants import parameters_source, read_roster
 from autograder.errors import AssignmentError, UsageError
 
 __all__ = ["release", "student_template", "PREPROCESSORS", "FORBIDDEN_MARKERS"]
@@ -151,6 +154,46 @@ def release(assignment: Assignment, out_dir: Path) -> Path:
             target.unlink(missing_ok=True)
         raise
     return templates[0][0]
+
+
+_STUDENT_FOLDER = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@+-]*$")
+
+
+def release_variants(assignment: Assignment, roster: Path, out_dir: Path) -> list[Path]:
+    """Release one copy per student of ``roster``: ``<out>/<student>/<notebook>`` with the
+    notebook's parameters cell (tagged ``[variants] cell``) holding the student's variant.
+
+    Returns the notebooks written, in roster order. Raises :class:`AssignmentError`
+    when the assignment declares no variants, its notebook has no parameters cell,
+    or a student id cannot be a folder name.
+    """
+    spec = assignment.variants
+    if spec is None:
+        raise AssignmentError(f"{assignment.root}/assignment.toml has no [variants] table; "
+                              "declare the parameters before releasing with --variants.")
+    students = read_roster(Path(roster))
+    bad = [s for s in students if not _STUDENT_FOLDER.match(s) or ".." in s]
+    if bad:
+        raise AssignmentError(f"{roster}: student id(s) {bad[:5]} cannot be folder names; "
+                              "use ids of letters, digits and . _ - @ +.")
+    out_dir = Path(out_dir).resolve()
+    with tempfile.TemporaryDirectory(prefix="numgrade-release-") as scratch:
+        first = release(assignment, Path(scratch) / "release")
+        template = nbformat.read(str(first), as_version=4)
+        cells = [c for c in template.cells if spec.cell in c.get("metadata", {}).get("tags", [])]
+        if len(cells) != 1:
+            raise AssignmentError(
+                f"{assignment.notebook}: --variants needs exactly one code cell tagged "
+                f"{spec.cell!r} (the parameters cell); found {len(cells)}. Tag the cell that "
+                "sets the parameters (View > Cell Toolbar > Tags).")
+        written = []
+        for student in students:
+            folder = out_dir / student
+            shutil.copytree(first.parent, folder, dirs_exist_ok=True)
+            cells[0].source = parameters_source(spec.draw(assignment.name, student))
+            nbformat.write(template, str(folder / first.name), version=4)
+            written.append(folder / first.name)
+    return written
 
 
 # -- reading and writing -------------------------------------------------------

@@ -41,6 +41,7 @@ file, the key and what to do.
 
 from __future__ import annotations
 
+import datetime as dt
 import difflib
 import hashlib
 import re
@@ -56,6 +57,7 @@ from autograder.engine.celltests import CellTest, ManualCell
 from autograder.engine.forbidden import Rules
 from autograder.engine.nbgrader_source import course_source_dir, is_nbgrader_folder, nbgrader_parts
 from autograder.engine.otter_format import otter_parts
+from autograder.engine.variants import VariantSpec, parse_variants
 from autograder.errors import AssignmentError
 
 __all__ = [
@@ -72,9 +74,10 @@ SANDBOX_LIMITS = ("memory_bytes", "cpu_seconds", "processes", "open_files",
                   "file_size_bytes", "output_bytes")
 _TIMEOUTS = ("notebook_timeout", "call_timeout")
 _ALLOWED = {
-    "assignment": ("name", "title", "notebook", "data", "format", "requirements"),
+    "assignment": ("name", "title", "notebook", "data", "format", "requirements", "deadline"),
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
+    "variants": (),  # checked by autograder.engine.variants
 }
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
@@ -118,6 +121,11 @@ class Assignment:
         Cells a person grades (nbgrader's manually graded answers and tasks).
     requirements : tuple of str
         Extra packages the student's code needs (pip requirement strings).
+    variants : VariantSpec or None
+        The per-student parameters (``[variants]``, see :mod:`autograder.engine.variants`).
+    deadline : datetime or None
+        ``[assignment] deadline`` (a TOML date-time with its zone): checks marked
+        ``visibility("after_deadline")`` show their details once it has passed.
     """
 
     name: str
@@ -136,6 +144,8 @@ class Assignment:
     cell_tests: tuple[CellTest, ...] = ()
     requirements: tuple[str, ...] = ()
     manual_cells: tuple[ManualCell, ...] = ()
+    variants: VariantSpec | None = None
+    deadline: dt.datetime | None = None
 
     def __post_init__(self) -> None:
         if not self.notebooks:
@@ -285,6 +295,8 @@ def _check_keys(path: Path, config: dict[str, Any]) -> None:
         raise AssignmentError(f"{path}: unknown table(s) {_listed(unknown)}; "
                               f"allowed tables: {_listed([*_ALLOWED, 'manual'])}.")
     for table, allowed in _ALLOWED.items():
+        if table == "variants":
+            continue
         section = config.get(table, {})
         if not isinstance(section, dict):
             raise AssignmentError(f"{path}: '{table}' must be a table ([{table}]).")
@@ -353,7 +365,9 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
             "students) or checks/hidden/ (kept back)"
             + (", or autograder test cells with points to the notebooks." if parts else "."))
     timeouts, limits = _limits(toml_path, config)
-    extra: dict[str, Any] = {"requirements": requirements}
+    extra: dict[str, Any] = {"requirements": requirements,
+                             "variants": parse_variants(root, toml_path, config.get("variants")),
+                             "deadline": _deadline(toml_path, config)}
     if otter is not None:
         extra["cell_tests"] = otter[0]
     if parts is None and "manual" in config:
@@ -402,6 +416,14 @@ def _manual_tags(notebook: Path) -> set[str]:
                               "Jupyter and save it again.") from None
     return {t[len("manual:"):] for c in book.cells for t in c.get("metadata", {}).get("tags", [])
             if isinstance(t, str) and t.startswith("manual:")}
+
+
+def _deadline(toml_path: Path, config: dict[str, Any]) -> dt.datetime | None:
+    value = _get(toml_path, config, "assignment", "deadline", dt.datetime, None)
+    if value is not None and value.tzinfo is None:
+        raise AssignmentError(f"{toml_path}: [assignment] deadline must carry its time zone "
+                              f"(e.g. 2026-12-01T17:00:00Z); got {value}.")
+    return value
 
 
 def _name(root: Path, toml_path: Path, config: dict[str, Any]) -> str:

@@ -52,6 +52,7 @@ from autograder.engine.student_process import (
     check_cell_count,
     wall_limit,
 )
+from autograder.engine.variants import Variant, VariantSpec, travel_evidence
 from autograder.engine.submission import (
     Submission,
     file_sha256,
@@ -59,7 +60,7 @@ from autograder.engine.submission import (
     submission_sha256,
 )
 from autograder.errors import NotebookError, WorkerCrashed
-from autograder.results.model import CellError, CheckResult, SubmissionResult
+from autograder.results.model import SUBMISSION_NOTE, CellError, CheckResult, SubmissionResult
 from autograder.results.store import write_submission
 from autograder.sandbox import affinity
 from autograder.sandbox.policy import IsolationPolicy
@@ -110,8 +111,17 @@ def submission_key(sha256: str, assignment: Assignment, options: GradingOptions,
     :func:`assignment_digest`, when the caller has it already.
     """
     text = "|".join((sha256, digest or assignment_digest(assignment), engine_digest(),
-                     ENGINE_VERSION, options.digest(), repr(assignment.limits)))
+                     ENGINE_VERSION, options.digest(), repr(assignment.limits),
+                     _secret_fingerprint(assignment)))
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _secret_fingerprint(assignment: Assignment) -> str:
+    """A digest of the variants' course secret: a new secret draws new variants, so it
+    must not reuse results graded under the old one (the secret itself stays out)."""
+    if assignment.variants is None:
+        return ""
+    return str(assignment.variants.seed(assignment.name, "\0fingerprint"))
 
 
 def submission_seed(assignment: Assignment, student: str) -> int:
@@ -223,6 +233,8 @@ class Grader:
         self._checks: CheckSuite | None = None
         #: the submission being graded (its folder is hidden from the worker)
         self._source: Path | None = None
+        #: the variant of the submission being graded (None: no variants, or not on the roster)
+        self._variant: Variant | None = None
         self._checks_digest = ""
         self._requirements_ok = False
         #: public tests for grader.check, when the notebook is otter's (never the hidden ones)
@@ -318,6 +330,8 @@ class Grader:
         key = submission_key(raw_sha, self.assignment, self.options, digest=digest)
         seed = submission_seed(self.assignment, sub_id)
         self._source = Path(path)  # its folder holds other submissions: see _excluded_paths
+        spec = self.assignment.variants
+        self._variant = spec.lookup(self.assignment.name, sub_id) if spec is not None else None
         several = len(self.assignment.notebooks) > 1
         # -- intake: a notebook, folder or zip -> its files (engine/submission.py), and
         # whether the notebook is this assignment's (engine/identify.py)
@@ -336,8 +350,11 @@ class Grader:
                                             "person to grade them; they are not in the score yet.")
         result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
                          execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
+        if spec is not None:
+            result = with_variant(result, self.assignment.name, spec, self._variant)
         if out_dir is not None:
-            write_submission(out_dir, result, title=self.assignment.title)
+            write_submission(out_dir, result, title=self.assignment.title,
+                             deadline=self.assignment.deadline)
         return result
 
     def _grade_part(self, name: str, path: Path | None, submission: Submission, seed: int,
@@ -486,7 +503,9 @@ class Grader:
             target=target, functions=tuple(functions), forbidden=forbidden,
             call_timeout=self.options.call_timeout or self.assignment.call_timeout, seed=seed,
             hidden_root=self.assignment.root / "checks" / "hidden",
-            attachments=(out_dir / "images") if out_dir is not None else None)
+            attachments=(out_dir / "images") if out_dir is not None else None,
+            variant=self._variant,
+            has_variants=self.assignment.variants is not None)
 
     def _check_session(self, context: CheckContext, digest: str) -> CheckSuite:
         """The pytest session of the checks: kept while the assignment folder is unchanged.
@@ -521,6 +540,25 @@ class Grader:
         if (package.parent / "pyproject.toml").exists():  # an editable install: the repository
             roots.add(package.parent)
         return sorted(roots)
+
+
+def with_variant(result: SubmissionResult, assignment: str, spec: VariantSpec,
+                 variant: Variant | None) -> SubmissionResult:
+    """``result`` with the student's variant recorded, and a note for a person when the id
+    has no variant or the outputs match a classmate's variant (computed here, on the
+    trusted side, from the outputs the checks recorded)."""
+    if variant is None:
+        return replace(result, variant={"student": result.id, "seed": None, "params": None},
+                       notes=result.notes + (
+                           f"{SUBMISSION_NOTE}the id {result.id!r} is not on the roster of "
+                           "this assignment's variants, so the checks that need the student's "
+                           "parameters were not scored; find the student and grade by hand.",))
+    observed = {k: v for t in result.tests for k, v in t.observed}
+    roster = spec.students() or ()
+    others = [spec.draw(assignment, s) for s in roster if s != variant.student]
+    evidence = travel_evidence(variant, observed, others, spec.answers) if observed else []
+    notes = tuple(f"{SUBMISSION_NOTE}an answer that travelled: {e}." for e in evidence)
+    return replace(result, variant=variant.to_dict(), notes=result.notes + notes)
 
 
 def summarise_run(run: NotebookRun, notebook: Notebook) -> str:

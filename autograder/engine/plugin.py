@@ -2,8 +2,8 @@
 
 Registered explicitly by :mod:`autograder.engine.checkrun` in the one pytest session
 a grader keeps (never auto-loaded); :meth:`GradingPlugin.begin` points it at each
-submission in turn. It provides the fixtures ``student``, ``credit``, ``rng`` and
-``feedback``, the marker ``points``, and records one :class:`CheckResult` per
+submission in turn. It provides the fixtures ``student``, ``credit``, ``rng``,
+``feedback`` and ``variant``, the markers ``points`` and ``visibility``, and records one :class:`CheckResult` per
 collected item. Like pytest-timeout, it lives in one readable module.
 """
 
@@ -19,11 +19,13 @@ import numpy as np
 import pytest
 
 from autograder.engine.proxy import CallLog, CallTarget, Student
+from autograder.engine.variants import Variant
 from autograder.errors import (
     CallTimeout,
     CheckFailure,
     ForbiddenUse,
     MissingFunction,
+    NoVariant,
     NotRun,
     PartialCredit,
     StudentError,
@@ -61,6 +63,13 @@ class Feedback:
     folder: Path | None
     check: str
     attachments: list[Attachment] = field(default_factory=list)
+    #: what the check says it gave the student's function (shown at the "input" level)
+    shown_input: str = ""
+
+    def input(self, text: str) -> None:
+        """Describe the input of this check; checks marked ``visibility("input")`` show
+        this text instead of their message (never the expected value)."""
+        self.shown_input = str(text)
 
     def image(self, label: str, png: bytes) -> None:
         if self.folder is None or not isinstance(png, (bytes, bytearray)):
@@ -85,6 +94,43 @@ class CheckContext:
     seed: int
     hidden_root: Path | None
     attachments: Path | None = None
+    #: the student's variant; None with ``has_variants``: the id is not on the roster
+    variant: Variant | None = None
+    has_variants: bool = False
+
+
+#: what a student sees of a check (``@pytest.mark.visibility(LEVEL)``)
+LEVELS = ("hidden", "after_deadline", "input", "visible")
+
+
+class VariantView:
+    """The ``variant`` fixture: the student's parameters, and a place to record outputs.
+
+    ``variant["n"]`` is a parameter; ``variant.record("area", value)`` notes the
+    student's output for a varied quantity, compared after grading against every
+    roster variant's expected answers (answers that travel).
+    """
+
+    def __init__(self, variant: Variant) -> None:
+        self.student, self.seed, self.params = variant.student, variant.seed, variant.as_dict()
+        self.observed: dict[str, object] = {}
+
+    def __getitem__(self, name: str) -> object:
+        return self.params[name]
+
+    def record(self, name: str, value: object) -> None:
+        self.observed[str(name)] = value
+
+
+def item_level(item: pytest.Item) -> str | None:
+    marker = item.get_closest_marker("visibility")
+    if marker is None:
+        return None
+    level = marker.args[0] if marker.args else marker.kwargs.get("level")
+    if level not in LEVELS:
+        raise ValueError(f"visibility must be one of {', '.join(LEVELS)}; got {level!r} "
+                         f"on {item.nodeid}.")
+    return str(level)
 
 
 def check_name(item: pytest.Item) -> tuple[str, str | None]:
@@ -125,10 +171,13 @@ class GradingPlugin:
         self._log = CallLog()
         self._feedback: Feedback | None = None
         self._seen: set[str] = set()
+        self._variant: VariantView | None = None
 
     # -- configuration -----------------------------------------------------
     def pytest_configure(self, config: pytest.Config) -> None:
         config.addinivalue_line("markers", "points(n): points awarded by this check item")
+        config.addinivalue_line("markers", "visibility(level): what a student sees of this "
+                                "check: hidden, after_deadline, input or visible")
 
     def pytest_collection_finish(self, session: pytest.Session) -> None:
         self.collected = len(session.items)
@@ -162,11 +211,24 @@ class GradingPlugin:
         assert self._feedback is not None
         return self._feedback
 
+    @pytest.fixture
+    def variant(self) -> VariantView:
+        """The student's variant; a person grades the check when the id has none."""
+        if not self.context.has_variants:
+            raise RuntimeError("The `variant` fixture needs a [variants] table in "
+                               "assignment.toml; this assignment declares none.")
+        if self.context.variant is None:
+            raise NoVariant("This check needs your own parameters and your id is not on the "
+                            "roster of this assignment's variants; a person will grade it.")
+        self._variant = VariantView(self.context.variant)
+        return self._variant
+
     # -- verdicts ----------------------------------------------------------
     @pytest.hookimpl(tryfirst=True)
     def pytest_runtest_setup(self, item: pytest.Item) -> None:
         self._log.names.clear()
         self._log.notes.clear()
+        self._variant = None
         name, _ = check_name(item)
         self._feedback = Feedback(self.context.attachments, name)
         if hasattr(self.context.target, "current_check"):  # for "not run, because ..." messages
@@ -202,9 +264,12 @@ class GradingPlugin:
         self.instructor_log.extend(f"{name}: {note}" for note in self._log.notes)
         self._log.notes.clear()
         attachments = tuple(self._feedback.attachments) if self._feedback else ()
+        observed = tuple(self._variant.observed.items()) if self._variant else ()
         self.results.append(CheckResult(
             name=name, score=round(points * fraction, 6), max_score=points, output=message,
-            hidden=hidden, kind=kind, dataset=dataset, attachments=attachments))
+            hidden=hidden, kind=kind, dataset=dataset, attachments=attachments,
+            level=item_level(item), shown_input=self._feedback.shown_input if self._feedback
+            else "", observed=tuple((k, _plain(v)) for k, v in observed)))
 
     def _is_hidden(self, item: pytest.Item) -> bool:
         root = self.context.hidden_root
@@ -213,6 +278,8 @@ class GradingPlugin:
     def _verdict(self, exc: BaseException | None, hidden: bool, name: str) -> tuple[str, float, str]:
         if exc is None:
             return "ok", 1.0, ""
+        if isinstance(exc, NoVariant):
+            return "needs-person", 0.0, str(exc)
         if isinstance(exc, PartialCredit):
             return "partial", exc.fraction, str(exc)
         for cls, kind in _KINDS:
@@ -228,6 +295,15 @@ class GradingPlugin:
         return ("check-error", 0.0,
                 "The check could not use what your function returned" + detail +
                 ". Make sure it returns exactly the type and shape the assignment asks for.")
+
+
+def _plain(value: object) -> object:
+    """A recorded output as plain data for results.json (arrays to lists, scalars to floats)."""
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return repr(value)[:200]
+    return array.tolist() if array.size <= 10_000 else repr(value)[:200]
 
 
 #: characters of the student's own exception message a hidden check may show

@@ -23,10 +23,11 @@ What a student sees:
 from __future__ import annotations
 
 import base64
+import datetime as dt
 import functools
 import re
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import jinja2
@@ -212,18 +213,57 @@ def feedback_context(folder: Path, result: SubmissionResult, *, title: str | Non
     }
 
 
+#: what replaces a check's message at each visibility level (None: the message itself)
+_LEVEL_NOTES = {"hidden": "Details of this check are not shown.",
+                "after_deadline": "Details of this check are shown after the deadline."}
+
+
+def as_students_see(result: SubmissionResult, *, past_deadline: bool) -> SubmissionResult:
+    """``result`` cut to what a student may see of each check's visibility level.
+
+    ``hidden``: name, status and points; ``after_deadline``: the same until the
+    deadline, then in full; ``input``: the input the check described, never its
+    message (which may hold the expected value); ``visible`` or none: in full.
+    Rendered when the page is shown, so passing the deadline changes it without
+    a regrade. The stored result keeps everything.
+    """
+    return result.with_tests(tuple(_cut(c, past_deadline) for c in result.tests))
+
+
+def _cut(check: CheckResult, past_deadline: bool) -> CheckResult:
+    level = check.level
+    if level is None or level == "visible" or (level == "after_deadline" and past_deadline):
+        return check
+    if level == "input":
+        shown = f"Input: {check.shown_input}" if check.shown_input else "The input is not described."
+        return replace(check, output=shown if check.status != "passed" else "", attachments=())
+    return replace(check, output=_LEVEL_NOTES[level] if check.status != "passed" else "",
+                   attachments=())
+
+
+def is_past(deadline: dt.datetime | None, now: dt.datetime | None = None) -> bool:
+    """Whether ``deadline`` has passed (no deadline: never)."""
+    if deadline is None:
+        return False
+    return (now or dt.datetime.now(dt.timezone.utc)) >= deadline
+
+
 def _points(checks: list[CheckResult]) -> dict[str, str]:
     return {"score": f"{sum(c.score for c in checks):g}",
             "max_score": f"{sum(c.max_score for c in checks):g}"}
 
 
-def render_feedback(folder: Path, result: SubmissionResult, *, title: str | None = None) -> str:
-    """The HTML of ``result``'s feedback page (pictures read from ``folder``)."""
+def render_feedback(folder: Path, result: SubmissionResult, *, title: str | None = None,
+                    deadline: dt.datetime | None = None, now: dt.datetime | None = None) -> str:
+    """The HTML of ``result``'s feedback page (pictures read from ``folder``), each check
+    shown at its visibility level as of ``now`` and ``deadline``."""
     template = template_environment().get_template("feedback.html.j2")
-    return template.render(feedback_context(folder, result, title=title))
+    shown = as_students_see(result, past_deadline=is_past(deadline, now))
+    return template.render(feedback_context(folder, shown, title=title))
 
 
-def write_feedback(folder: Path, result: SubmissionResult, *, title: str | None = None) -> Path:
+def write_feedback(folder: Path, result: SubmissionResult, *, title: str | None = None,
+                   deadline: dt.datetime | None = None) -> Path:
     """Write ``folder/feedback.html`` atomically; return its path.
 
     Parameters
@@ -237,10 +277,10 @@ def write_feedback(folder: Path, result: SubmissionResult, *, title: str | None 
         The assignment's title for the page heading (default: its name).
     """
     path = folder / FEEDBACK_NAME
-    atomic_write_text(path, render_feedback(folder, result, title=title))
+    atomic_write_text(path, render_feedback(folder, result, title=title, deadline=deadline))
     return path
 
 
-__all__ = ["FEEDBACK_NAME", "KIND_LABELS", "Picture", "check_status", "clean_text", "clip",
+__all__ = ["FEEDBACK_NAME", "KIND_LABELS", "Picture", "as_students_see", "check_status", "is_past", "clean_text", "clip",
            "embed_picture", "feedback_context", "render_feedback", "template_environment",
            "write_feedback"]

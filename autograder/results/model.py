@@ -44,6 +44,13 @@ class CheckResult:
     attachments: tuple[Attachment, ...] = ()
     #: the assignment notebook the check belongs to, when an assignment has several
     notebook: str | None = None
+    #: what a student sees (``visibility`` marker): hidden | after_deadline | input |
+    #: visible; None: public checks in full, hidden ones by name, status and message
+    level: str | None = None
+    #: the check's description of its input (shown at the "input" level)
+    shown_input: str = ""
+    #: the student's outputs for varied quantities, recorded by ``variant.record``
+    observed: tuple[tuple[str, Any], ...] = ()
 
     @property
     def status(self) -> Status:
@@ -51,6 +58,13 @@ class CheckResult:
 
     @property
     def visibility(self) -> Visibility:
+        """Gradescope's visibility: a check shown after the deadline is ``after_due_date``;
+        the "hidden" and "input" levels are ``visible`` with their output cut by
+        :func:`autograder.results.feedback.as_students_see`."""
+        if self.level == "after_deadline":
+            return "after_due_date"
+        if self.level is not None:
+            return "visible"
         return "after_published" if self.hidden else "visible"
 
     def to_dict(self) -> dict[str, Any]:
@@ -66,6 +80,12 @@ class CheckResult:
         }
         if self.notebook is not None:
             entry["extra_data"]["notebook"] = self.notebook
+        if self.level is not None:
+            entry["extra_data"]["level"] = self.level
+        if self.shown_input:
+            entry["extra_data"]["shown_input"] = self.shown_input
+        if self.observed:
+            entry["extra_data"]["observed"] = dict(self.observed)
         return entry
 
     @classmethod
@@ -75,6 +95,8 @@ class CheckResult:
                    max_score=float(data["max_score"]), output=data.get("output", ""),
                    hidden=bool(extra.get("hidden", False)), kind=extra.get("kind", "ok"),
                    dataset=extra.get("dataset"), notebook=extra.get("notebook"),
+                   level=extra.get("level"), shown_input=extra.get("shown_input", ""),
+                   observed=tuple(dict(extra.get("observed", {})).items()),
                    attachments=tuple(Attachment(**a) for a in extra.get("attachments", [])))
 
 
@@ -118,6 +140,8 @@ class SubmissionResult:
     #: CPU seconds the student's code used (notebook and calls)
     cpu_seconds: float = 0.0
     max_score_declared: float | None = field(default=None, compare=False)
+    #: the student's variant (student, seed, params) when the assignment has variants
+    variant: dict[str, Any] | None = field(default=None, compare=False)
 
     @property
     def score(self) -> float:
@@ -148,6 +172,7 @@ class SubmissionResult:
                 "cpu_seconds": self.cpu_seconds,
                 "cell_errors": [c.to_dict() for c in self.cell_errors],
                 "stdout": self.stdout,
+                **({"variant": self.variant} if self.variant is not None else {}),
             },
         }
 
@@ -164,4 +189,5 @@ class SubmissionResult:
             stdout=extra.get("stdout", ""), notes=tuple(extra.get("notes", [])),
             engine=extra.get("engine", ""), cpu_seconds=float(extra.get("cpu_seconds", 0.0)),
             max_score_declared=float(data.get("max_score", 0.0)),
+            variant=extra.get("variant"),
         )

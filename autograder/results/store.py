@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import csv
 import io
+import datetime as dt
 import json
 from pathlib import Path
 from typing import Iterable, Sequence
 
-from autograder.results.feedback import FEEDBACK_NAME, write_feedback
+from autograder.results.feedback import FEEDBACK_NAME, is_past, write_feedback
 from autograder.results.files import atomic_write_text
 from autograder.results.model import SubmissionResult
 
@@ -29,7 +30,8 @@ def write_result(folder: Path, result: SubmissionResult) -> Path:
     return path
 
 
-def write_submission(folder: Path, result: SubmissionResult, *, title: str) -> SubmissionResult:
+def write_submission(folder: Path, result: SubmissionResult, *, title: str,
+                     deadline: dt.datetime | None = None) -> SubmissionResult:
     """Write ``result`` into ``folder``: ``results.json`` first, then ``feedback.html``; return it.
 
     Pictures and the instructor's log are written into ``folder`` by the checks
@@ -37,19 +39,24 @@ def write_submission(folder: Path, result: SubmissionResult, *, title: str) -> S
     what is written once the verdicts are in.
     """
     write_result(folder, result)
-    write_feedback(folder, result, title=title)
+    write_feedback(folder, result, title=title, deadline=deadline)
     return result
 
 
-def refresh_feedback(folder: Path, result: SubmissionResult, *, title: str) -> None:
-    """Write ``feedback.html`` for a reused result when it is missing or older than its result."""
+def refresh_feedback(folder: Path, result: SubmissionResult, *, title: str,
+                     deadline: dt.datetime | None = None) -> None:
+    """Write ``feedback.html`` for a reused result when it is missing or older than its result,
+    or was written before ``deadline`` which has passed since (checks shown after it)."""
     page, data = folder / FEEDBACK_NAME, folder / RESULTS_NAME
     try:
-        fresh = page.stat().st_mtime_ns >= data.stat().st_mtime_ns
+        written = page.stat().st_mtime_ns
+        fresh = written >= data.stat().st_mtime_ns
     except OSError:
-        fresh = False
+        written, fresh = 0, False
+    if fresh and deadline is not None and is_past(deadline):
+        fresh = written >= deadline.timestamp() * 1e9
     if not fresh:
-        write_feedback(folder, result, title=title)
+        write_feedback(folder, result, title=title, deadline=deadline)
 
 
 def read_result(folder: Path) -> SubmissionResult | None:

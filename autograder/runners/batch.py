@@ -389,7 +389,8 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
                                             replace(previous, source=str(path)),
                                             title=assignment.title)
             done[ids[path]] = previous
-            refresh_feedback(out_dir / ids[path], previous, title=assignment.title)
+            refresh_feedback(out_dir / ids[path], previous, title=assignment.title,
+                             deadline=assignment.deadline)
         else:
             todo.append(Job(path, ids[path]))
     paths = [p for p in paths if p not in conflicts]

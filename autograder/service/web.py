@@ -11,6 +11,8 @@ reach the course, the database and the upload store through the
 
 from __future__ import annotations
 
+import datetime as dt
+
 import functools
 import hashlib
 import hmac
@@ -28,7 +30,9 @@ from starlette.concurrency import run_in_threadpool
 
 from autograder.errors import UploadRejected
 from autograder.results.feedback import FEEDBACK_NAME, render_feedback
+from autograder.results.store import read_result
 from autograder.service import auth, rubrics, throttle
+from autograder.service.standing import deadline_for
 from autograder.service.bounds import RequestTooLarge
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
@@ -145,14 +149,19 @@ class Service:
         folder = self.storage.resolve_result(sub.result_dir) if sub.result_dir else None
         if sub.status != "graded" or folder is None or not (folder / FEEDBACK_NAME).is_file():
             raise HTTPException(404, "This attempt has no feedback yet; it is still being graded.")
+        policy = self.course.assignment(sub.assignment)
         with self.factory() as session:
             people = rubrics.load(session, [sub])
-        result = people.result(sub) if people.touches(sub.id) else None
-        if result is not None:
-            policy = self.course.assignment(sub.assignment)
-            return sandboxed(render_feedback(folder, result,
-                                             title=policy.title if policy else None))
-        return sandboxed((folder / FEEDBACK_NAME).read_text(encoding="utf-8"))
+            result = people.result(sub) if people.touches(sub.id) else read_result(folder)
+            leveled = result is not None and any(t.level for t in result.tests)
+            if result is None or policy is None or not (leveled or people.touches(sub.id)):
+                return sandboxed((folder / FEEDBACK_NAME).read_text(encoding="utf-8"))
+            # checks with a visibility level: rendered now, against the student's own
+            # deadline, so passing it shows the "after_deadline" checks without a regrade
+            deadline = deadline_for(session, policy, sub.user_id) if leveled else None
+        if deadline is not None and deadline.tzinfo is None:
+            deadline = deadline.replace(tzinfo=dt.timezone.utc)
+        return sandboxed(render_feedback(folder, result, title=policy.title, deadline=deadline))
 
 
 class NeedSignIn(Exception):
