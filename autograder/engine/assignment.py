@@ -73,6 +73,8 @@ _ALLOWED = {
     "assignment": ("name", "title", "notebook", "data", "format", "requirements"),
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
+    # read by ``validate --mutants`` (autograder.authoring.mutants_run), never by grading
+    "mutants": ("min_kill_rate", "max"),
 }
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
