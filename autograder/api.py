@@ -138,18 +138,21 @@ def new(name: str, *, out: Path | None = None, title: str | None = None) -> Path
 
 def validate(assignment: str | Path | Assignment, *, work: Path | None = None,
              jobs: int | None = None, options: GradingOptions | None = None,
-             started_slot: GradingSlot | None = None) -> "ValidationRun":
+             started_slot: GradingSlot | None = None, mutants: bool = False,
+             max_mutants: int | None = None) -> "ValidationRun":
     """Release ``assignment``, check nothing leaked, grade its examples and the
     released template, and compare each score with its band in
     ``examples/expected.toml`` (see :mod:`autograder.authoring.validate`).
 
     ``work``, when given, keeps the release and the results (feedback pages) there.
-    ``started_slot``: as for :func:`grade`.
+    ``started_slot``: as for :func:`grade`. ``mutants``: also grade mutants of the
+    model solution (:mod:`autograder.authoring.mutants_run`), at most ``max_mutants``.
     """
     from autograder.authoring.validate import validate as _validate
 
     return _validate(resolve_assignment(assignment), work=None if work is None else Path(work),
-                     jobs=jobs, options=options, started_slot=started_slot)
+                     jobs=jobs, options=options, started_slot=started_slot, mutants=mutants,
+                     max_mutants=max_mutants)
 
 
 def check(notebook: Path, *, assignment: str | Path | Assignment | None = None,

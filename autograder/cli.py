@@ -106,6 +106,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help="keep the release and the results here (default: a temporary folder)")
     val.add_argument("--jobs", type=_positive_int, default=None,
                      help=f"examples graded in parallel (default: number of cores, {os.cpu_count()})")
+    val.add_argument("--mutants", action="store_true",
+                     help="also grade mutants of the model solution and report which checks "
+                          "kill them (fails below [mutants] min_kill_rate of assignment.toml)")
+    val.add_argument("--max-mutants", type=_positive_int, default=None,
+                     help="mutants graded (default: [mutants] max of assignment.toml, or 40)")
+    val.add_argument("--out", type=Path, default=None,
+                     help="with --mutants: folder for mutants.json and mutants.html "
+                          "(default: ./validate-ASSIGNMENT)")
     _timing_options(val)
 
     chk = commands.add_parser("check", help="run the public checks on your notebook before submitting")
@@ -336,8 +344,15 @@ def _validate(args: argparse.Namespace) -> int:
         from autograder.authoring.validate import format_report
 
         report = api.validate(args.assignment, work=args.work, jobs=args.jobs,
-                              options=_options(args), started_slot=started_slot)
+                              options=_options(args), started_slot=started_slot,
+                              mutants=args.mutants, max_mutants=args.max_mutants)
     print(format_report(report))
+    if report.mutation is not None:
+        from autograder.authoring.mutants_report import write_mutants
+
+        out = args.out or Path(f"validate-{report.assignment}")
+        json_path, html_path = write_mutants(report.mutation, out)
+        print(f"Wrote {json_path} and {html_path}.")
     return 0 if report.ok else 1
 
 

@@ -22,12 +22,13 @@ from __future__ import annotations
 import shutil
 import tempfile
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import nbformat
 
+from autograder.authoring.mutants_run import MutationRun, run_mutants
 from autograder.authoring.release import FORBIDDEN_MARKERS, release
 from autograder.engine.assignment import Assignment
 from autograder.engine.grader import GradingOptions
@@ -78,10 +79,19 @@ class ValidationRun:
     examples: tuple[ExampleCheck, ...]
     leaks: tuple[str, ...] = ()
     problems: tuple[str, ...] = field(default=())
+    #: ``validate --mutants``: the mutation analysis (:mod:`autograder.authoring.mutants_run`)
+    mutation: MutationRun | None = None
 
     @property
     def ok(self) -> bool:
-        return not self.leaks and not self.problems and all(e.ok for e in self.examples)
+        return (not self.leaks and not self.problems and all(e.ok for e in self.examples)
+                and (self.mutation is None or self.mutation.ok))
+
+    @property
+    def wrongly_failed(self) -> tuple[ExampleCheck, ...]:
+        """Examples whose band is full marks (correct variants) but that lose points."""
+        return tuple(e for e in self.examples if e.low is not None and e.low >= 1 - 1e-9
+                     and e.fraction < 1 - 1e-9)
 
     def to_dict(self) -> dict[str, Any]:
         return {"assignment": self.assignment, "ok": self.ok, "leaks": list(self.leaks),
@@ -90,7 +100,8 @@ class ValidationRun:
 
 def validate(assignment: Assignment, *, work: Path | None = None, jobs: int | None = None,
              options: GradingOptions | None = None,
-             started_slot: GradingSlot | None = None) -> ValidationRun:
+             started_slot: GradingSlot | None = None, mutants: bool = False,
+             max_mutants: int | None = None) -> ValidationRun:
     """Release ``assignment``, look for leaks, grade its examples and check their bands.
 
     Parameters
@@ -106,11 +117,21 @@ def validate(assignment: Assignment, *, work: Path | None = None, jobs: int | No
     started_slot : GradingSlot, optional
         A slot started ahead (:func:`autograder.engine.slot.start_early`): the first
         local slot; the caller closes it.
+    mutants : bool
+        Also grade mutants of the model solution and say which checks kill them
+        (:func:`autograder.authoring.mutants_run.run_mutants`); ``max_mutants``
+        overrides ``[mutants] max``.
     """
     if work is None:
         with tempfile.TemporaryDirectory(prefix=f"validate-{assignment.name}-") as scratch:
-            return _validate(assignment, Path(scratch), jobs, options, started_slot)
-    return _validate(assignment, Path(work), jobs, options, started_slot)
+            return validate(assignment, work=Path(scratch), jobs=jobs, options=options,
+                            started_slot=started_slot, mutants=mutants, max_mutants=max_mutants)
+    run = _validate(assignment, Path(work), jobs, options, started_slot)
+    if not mutants:
+        return run
+    mutation = run_mutants(assignment, Path(work), jobs=jobs, options=options,
+                           max_mutants=max_mutants)
+    return replace(run, mutation=mutation)
 
 
 def _validate(assignment: Assignment, work: Path, jobs: int | None,
@@ -289,6 +310,13 @@ def format_report(report: ValidationRun) -> str:
     if report.problems:
         lines.append("Problems:")
         lines += [f"  - {problem}" for problem in report.problems]
+    for e in report.wrongly_failed:
+        lines.append(f"Correct variant {e.name} (band: full marks) loses points: a check "
+                     "wrongly fails it (see its row above).")
+    if report.mutation is not None:
+        from autograder.authoring.mutants_report import format_mutants
+
+        lines += ["", format_mutants(report.mutation), ""]
     lines.append(f"{report.assignment}: " + (
         "every example is in its band and nothing leaked." if report.ok else
         "NOT valid; fix the rows marked FAIL and the lines above."))

@@ -78,6 +78,8 @@ _ALLOWED = {
     "rules": ("forbid", "reason", "internal_use"),
     "limits": _TIMEOUTS + SANDBOX_LIMITS,
     "variants": (),  # checked by autograder.engine.variants
+    # read by ``validate --mutants`` (autograder.authoring.mutants_run), never by grading
+    "mutants": ("min_kill_rate", "max"),
 }
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
