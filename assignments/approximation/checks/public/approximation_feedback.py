@@ -110,7 +110,7 @@ def nan_at_nodes(got: object, t: np.ndarray, n: int, kind: str) -> np.ndarray | 
         return None
     if arr.shape != np.shape(t):
         return None
-    flat = np.asarray(t, dtype=float).reshape(-1)
+    flat = np.ravel(np.asarray(t, dtype=np.float64))
     at_node = np.abs(flat[:, None] - nodes(n, kind)[None, :]).min(axis=1) <= SAME_NODE
     return np.isnan(arr.reshape(-1)) & at_node
 
