@@ -3,7 +3,10 @@
 For every shipped assignment, notebooks are made from the released template
 (``autograder release``) with every graded function replaced by a stub: a
 constant (``return 0``, ``return [0, 1, 2]``, ``return np.zeros(...)``,
-``return None``), random answers, and the template itself. Each is graded with
+``return None``), random answers, functions that return a constant or random
+values (for a function that returns a function, such as approximation's
+``make_interpolant``), one that samples the functions it is given exactly as the
+rules ask and then returns a constant, and the template itself. Each is graded with
 ``autograder grade`` and must score 0 on every check, so 0 per function and 0
 in total: a degenerate case (collinear points, one pin, degree 0) earns credit
 only for a function that also gets the general cases of its family right.
@@ -43,6 +46,29 @@ STUBS = {
     "random-indices": ("rng = np.random.default_rng(len(repr(args)))\n"
                        "    n = len(args[0]) if args and hasattr(args[0], '__len__') else 3\n"
                        "    return rng.permutation(n)[:max(1, min(n, 3))]"),
+    # junk returned as a function (approximation's make_interpolant returns p(t))
+    "constant-function": ("def p(t, *rest, **more):\n"
+                          "        t = np.asarray(t, dtype=float)\n"
+                          "        return 0.5 if t.ndim == 0 else np.full(t.shape, 0.5)\n"
+                          "    return p"),
+    "random-function": ("def p(t, *rest, **more):\n"
+                        "        t = np.asarray(t, dtype=float)\n"
+                        "        rng = np.random.default_rng(t.size)\n"
+                        "        return float(rng.normal()) if t.ndim == 0 else "
+                        "rng.normal(size=t.shape)\n"
+                        "    return p"),
+    # obeys every rule about sampling (each callable argument once, at the Chebyshev
+    # nodes of the degree given) and returns a constant: sampling earns nothing alone
+    "sampling-constant": ("n = next((a for a in args if isinstance(a, int)), 8)\n"
+                          "    x = -np.cos(np.arange(n + 1) * np.pi / n)\n"
+                          "    level = [float(np.mean(a(x))) for a in args if callable(a)]\n"
+                          "    level = level[0] if level else 0.5\n"
+                          "    def p(t, *rest, **more):\n"
+                          "        t = np.asarray(t, dtype=float)\n"
+                          "        return level if t.ndim == 0 else np.full(t.shape, level)\n"
+                          "    if any(callable(a) for a in args) and len(args) >= 4:\n"
+                          "        return p(args[3])  # interpolate(f, n, nodes, t)\n"
+                          "    return p"),
 }
 
 

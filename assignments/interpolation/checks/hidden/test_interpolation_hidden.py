@@ -286,7 +286,7 @@ def test_interp_shapes(student: Student, credit: Credit, rng: np.random.Generato
 def test_exact_at_all_nodes(student: Student, rng: np.random.Generator) -> None:
     n = unseen_degree(rng, 5, 60)
     x = equispaced_nodes(n)
-    f = fb.runge(x)
+    f = fb.not_runge(x, rng)  # not Runge's function: a lagrange_interp ignoring fvals fails
     order = rng.permutation(n + 1)
     got = student.lagrange_interp(f, x, 1000.0 * equispaced_weights(n), x[order])
     fb.judge_exact(got, f, x, order, call=f"lagrange_interp(f, x, w, t=x) with {n + 1} "
@@ -337,8 +337,12 @@ def _next_to_nodes(rng: np.random.Generator) -> NearCase:
 def _next_to_zero(rng: np.random.Generator) -> NearCase:
     n = 16
     x = equispaced_nodes(n)  # node 8 is exactly 0
-    t = np.array([5e-324, -5e-324, 2.5e-320, 1e-310, -3e-308])
-    return x, equispaced_weights(n), fb.runge(x), t, "17 equispaced nodes, t next to the node 0"
+    # two ordinary points (not nodes) besides: values next to 0 alone are all about f(0),
+    # so any constant would be "a common factor times the interpolant"
+    t = np.array([5e-324, -5e-324, 2.5e-320, 1e-310, -3e-308, 0.3, -0.7])
+    # not Runge's function: p(0) must be the sample there, not a memorised 1
+    return x, equispaced_weights(n), fb.not_runge(x, rng), t, ("17 equispaced nodes, t next "
+                                                               "to the node 0")
 
 
 NEAR: dict[str, Dataset[NearCase]] = {

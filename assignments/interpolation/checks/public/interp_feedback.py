@@ -109,6 +109,17 @@ def runge(x: ArrayLike) -> np.ndarray:
     return 1.0 / (1.0 + 16.0 * np.asarray(x, dtype=float) ** 2)
 
 
+def not_runge(x: ArrayLike, rng: np.random.Generator) -> np.ndarray:
+    """Smooth data at ``x`` that are not Runge's function (a new phase per submission).
+
+    Checks that ask for the data back at the nodes use these, so that a
+    ``lagrange_interp`` that ignores ``fvals`` and returns the lecture's
+    1 / (1 + 16 x^2) fails them.
+    """
+    x = np.asarray(x, dtype=float)
+    return np.cos(3.0 * x + rng.uniform(0.5, 1.5)) + 0.5 * x
+
+
 # ---------------------------------------------------------------------------
 # calling the student
 # ---------------------------------------------------------------------------
