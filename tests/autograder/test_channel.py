@@ -22,7 +22,6 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from tests.autograder.test_problems import user_env  # the ordinary user's venv (a fixture)
 from tests.files.make_problems import SOLUTION, nb
 from tests.support import envs
 
@@ -133,7 +132,7 @@ def write_batch(folder: Path) -> dict[str, str]:
 @pytest.fixture(scope="module", params=IDENTITIES)
 def batch(request: pytest.FixtureRequest) -> dict[str, object]:
     identity = request.param
-    env_user, source = request.getfixturevalue(user_env.__name__) if identity == "user" else (None, ROOT)
+    env_user, source = request.getfixturevalue("ordinary_user_venv") if identity == "user" else (None, ROOT)
     top = envs.shared_tempdir(f"numgrade-channel-{identity}-")
     request.addfinalizer(lambda: shutil.rmtree(top, ignore_errors=True))
     books, out, tmp = top / "books", top / "results", top / "tmp"

@@ -37,8 +37,6 @@ from tests.support import envs
 from tests.support.assignments import CHECK, RIGHT, write_double
 
 REPO = Path(__file__).resolve().parents[2]
-#: what the engine needs besides the worker's stack, for the ordinary user's venv
-PACKAGES = ("nbformat", "pytest", "jinja2", "tqdm", "landlockpy", "pyseccomp")
 NEEDED = ("numpy", "scipy", "matplotlib", "IPython", "nbformat", "landlockpy", "pyseccomp")
 GRADER_TIMEOUT = 300  # wall-clock seconds a grader process may take before the test fails
 IDENTITIES = ["root", "user"] if os.geteuid() == 0 else ["self"]
@@ -76,25 +74,14 @@ RUNNER = textwrap.dedent("""
 
 
 @pytest.fixture(scope="module")
-def user_env() -> Iterator[envs.Env]:
-    """Debian's Python in a venv of an ordinary user holding the worker's libraries; the
-    engine itself comes from this checkout (``PYTHONPATH``), as for root."""
-    why = envs.can_switch_users()
-    if why is not None:
-        pytest.skip(f"the ordinary-user grader cannot run: {why}")
-    user = envs.ordinary_user()
-    ready = Path(envs.home(user)) / "numgrade-venv" / "bin" / "python"  # made by an earlier run
-    probe = envs.Env(ready, user).command("python", "-c", "import " + ", ".join(NEEDED))
-    if ready.exists() and subprocess.run(probe, capture_output=True).returncode == 0:
-        yield envs.Env(ready, user)
-        return
-    top = envs.shared_tempdir("numgrade-confinement-venv-")
-    envs.give_to(user, top)
-    try:
-        yield envs.make_venv(top / "venv", install=list(PACKAGES), python="/usr/bin/python3",
-                             user=user)
-    finally:
-        shutil.rmtree(top, ignore_errors=True)
+def user_env(ordinary_user_venv: tuple[envs.Env, Path]) -> envs.Env:
+    """Debian's Python in a venv of an ordinary user holding the worker's libraries (the
+    session's shared venv, conftest.py); the engine itself comes from this checkout
+    (``PYTHONPATH``), as for root."""
+    env = ordinary_user_venv[0]
+    probe = env.command("python", "-c", "import " + ", ".join(NEEDED))
+    assert subprocess.run(probe, capture_output=True).returncode == 0, "the venv lacks " + ", ".join(NEEDED)
+    return env
 
 
 @pytest.fixture(params=IDENTITIES)

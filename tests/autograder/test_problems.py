@@ -24,7 +24,6 @@ import subprocess
 import sys
 import threading
 import tomllib
-from collections.abc import Iterator
 from pathlib import Path
 
 import nbformat
@@ -143,24 +142,10 @@ def processes_named(name: str) -> list[int]:
 
 
 @pytest.fixture(scope="module")
-def user_env() -> Iterator[tuple[envs.Env, Path]]:
-    """Debian's Python in a venv of an ordinary user, numgrade installed non-editable; and
-    the user's own copy of the repository (the checkout may be unreadable to the user, as
-    under root's mode-700 home or a mktemp folder)."""
-    why = envs.can_switch_users()
-    if why is not None:
-        pytest.skip(f"the ordinary-user batch cannot run: {why}")
-    if not Path("/usr/bin/python3").exists():
-        pytest.skip("the ordinary-user batch needs Debian's /usr/bin/python3")
-    user = envs.ordinary_user()
-    top = envs.shared_tempdir("numgrade-problems-")
-    source = envs.copy_repository(top / "src")
-    envs.give_to(user, top)  # the user builds in src and creates the venv
-    install = [str(source)] + ([str(source / "reference")]
-                               if (source / "reference" / "pyproject.toml").exists() else [])
-    env = envs.make_venv(top / "venv", install=install, python="/usr/bin/python3", user=user)
-    yield env, source
-    shutil.rmtree(top, ignore_errors=True)
+def user_env(ordinary_user_venv: tuple[envs.Env, Path]) -> tuple[envs.Env, Path]:
+    """The ordinary user's venv and copy of the repository (built once per session, in
+    conftest.py)."""
+    return ordinary_user_venv
 
 
 def huge_outputs_notebook(folder: Path) -> Path:
