@@ -71,8 +71,8 @@ def load(session: Session, subs: Sequence[Submission]) -> Adjustments:
         else:
             mine[row.check] = ScoreOverride(row.check, row.score, row.reason)
     names = {s.assignment for s in subs}
-    released = frozenset(session.execute(select(Release.assignment, Release.question)
-                                         .where(Release.assignment.in_(names))).tuples())
+    released = frozenset(tuple(row) for row in session.execute(
+        select(Release.assignment, Release.question).where(Release.assignment.in_(names))))
     return Adjustments(marks, {k: v for k, v in overrides.items() if v}, released)
 
 
@@ -83,7 +83,7 @@ def marks_for(session: Session, ids: Iterable[int]) -> dict[tuple[int, str], Man
     for sub_id, item in session.execute(
             select(AppliedItem.submission_id, RubricItem)
             .join(RubricItem, AppliedItem.item_id == RubricItem.id)
-            .where(AppliedItem.submission_id.in_(ids)).order_by(RubricItem.id)).tuples():
+            .where(AppliedItem.submission_id.in_(ids)).order_by(RubricItem.id)):
         items.setdefault((sub_id, item.question), []).append((item.text, item.points))
     marks = {}
     for grade in session.scalars(select(AnswerGrade).where(AnswerGrade.submission_id.in_(ids))):

@@ -60,8 +60,10 @@ def student_pages(url: str, sub_id: int) -> list[str]:
             f"{url}/submissions/{sub_id}", f"{url}/submissions/999999"]
 
 
-def staff_pages(url: str) -> list[str]:
-    return [f"{url}/instructor", f"{url}/instructor/students/alice"]
+def staff_pages(url: str, sub_id: int) -> list[str]:
+    return [f"{url}/instructor", f"{url}/instructor/students/alice",
+            f"{url}/instructor/hull/grading", f"{url}/instructor/submissions/{sub_id}",
+            f"{url}/instructor/regrade-requests"]
 
 
 def sandboxed_copies(service: Running, sub_id: int, folder: Path) -> list[str]:
@@ -96,7 +98,7 @@ def test_every_page_passes_axe_and_fits_a_phone(service: Running, browser: suppo
     for url in student_pages(service.url, graded):
         problems += axe.page_problems(browser, axe_js, url)
     as_user(browser, service, "prof")
-    for url in staff_pages(service.url):
+    for url in staff_pages(service.url, graded):
         problems += axe.page_problems(browser, axe_js, url)
     assert not problems, "\n".join(problems)
 
