@@ -29,12 +29,7 @@ MESSAGE = "Your car's rear wheel is 4% off the reference at x = 3.2."
 browser = test_browser.browser
 
 
-@pytest.fixture(scope="module")
-def axe_js() -> str:
-    script = axe.axe_script()
-    if script is None:
-        pytest.skip(axe.skip_reason())
-    return script
+axe_js = axe.axe_js
 
 
 def _result(folder: Path, sid: str, wheel: float) -> SubmissionResult:

@@ -27,12 +27,7 @@ from tests.support import axe
 SOLUTION = (support.HULL_EXAMPLES / "solution.ipynb").read_bytes()
 
 
-@pytest.fixture(scope="module")
-def axe_js() -> str:
-    script = axe.axe_script()
-    if script is None:
-        pytest.skip(axe.skip_reason())
-    return script
+axe_js = axe.axe_js
 
 
 def sign_out(web: support.WebDriver) -> None:

@@ -13,6 +13,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 #: the WCAG levels the pages must meet (axe-core's tag names)
 WCAG_AA = ["wcag2a", "wcag2aa", "wcag21a", "wcag21aa"]
@@ -26,6 +28,16 @@ def axe_script() -> str | None:
         if path and Path(path).is_file():
             return Path(path).read_text(encoding="utf-8")
     return None
+
+
+@pytest.fixture(scope="module")
+def axe_js() -> str:
+    """The axe-core script (a test module takes it as ``axe_js = axe.axe_js``); skipped
+    with the reason when it is not installed."""
+    script = axe_script()
+    if script is None:
+        pytest.skip(skip_reason())
+    return script
 
 
 def skip_reason() -> str:
