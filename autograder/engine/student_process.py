@@ -138,6 +138,8 @@ class NotebookRun:
 OUTPUT_CAP = 1 << 20
 #: the most cell reports kept (each holds at most a 20,000-character traceback)
 MAX_CELL_REPORTS = 200
+#: names of the functions a notebook defined that the grader keeps from its report
+MAX_FUNCTION_NAMES = 10_000
 
 
 def check_cell_count(count: int) -> None:
@@ -310,7 +312,7 @@ class StudentProcess:
                         reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
                         return "ready", None, (reports,
                                                str(message.get("stdout", ""))[:OUTPUT_CAP],
-                                               [str(f)[:200] for f in message.get("functions", [])])
+                                               [str(f)[:200] for f in message.get("functions", [])[:MAX_FUNCTION_NAMES]])
                     else:
                         raise _Violation(f"it sent {_describe(message)} while the notebook ran")
                 except (KeyError, TypeError, ValueError):  # a malformed "ready"
