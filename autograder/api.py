@@ -31,15 +31,17 @@ def resolve_assignment(spec: str | Path | Assignment, *, course: Path | None = N
 
 
 def release(assignment: str | Path | Assignment, *, out: Path,
-            variants: Path | None = None) -> Path:
+            variants: Path | None = None, server: str | None = None) -> Path:
     """Write the student version of ``assignment`` to ``out``; return the notebook path.
 
     ``variants``: a roster CSV; one notebook per student is written to
     ``out/<student>/`` with the student's parameters, and the first is returned.
+    ``server``: the course's service, written into the notebooks for ``submit()``.
     """
     if variants is not None:
-        return release_variants(resolve_assignment(assignment), Path(variants), Path(out))[0]
-    return _release(resolve_assignment(assignment), Path(out))
+        return release_variants(resolve_assignment(assignment), Path(variants), Path(out),
+                                server=server)[0]
+    return _release(resolve_assignment(assignment), Path(out), server=server)
 
 
 def grade(assignment: str | Path | Assignment, submissions: Sequence[Path], *, out: Path,

@@ -61,6 +61,8 @@ def build_parser() -> argparse.ArgumentParser:
     rel.add_argument("--variants", type=Path, default=None, metavar="ROSTER.csv",
                      help="write one notebook per student of this roster, each with the "
                           "student's parameters, to OUT/<student>/")
+    rel.add_argument("--server", default=None, metavar="URL",
+                     help="the course's service: submit() in the released notebook sends there")
 
     grd = commands.add_parser("grade", help="grade submitted notebooks with every check")
     grd.add_argument("assignment", help="a folder name under assignments/ or a path to one")
@@ -360,7 +362,7 @@ def _release(args: argparse.Namespace) -> int:
     from autograder import api
 
     path = api.release(api.resolve_assignment(args.assignment, course=args.course), out=args.out,
-                       variants=args.variants)
+                       variants=args.variants, server=args.server)
     if args.variants is not None:
         print(f"Wrote one student version per student of {args.variants} under {args.out}.")
         return 0

@@ -114,7 +114,7 @@ def student_template(assignment: Assignment, notebook: Path | None = None
     return nb
 
 
-def release(assignment: Assignment, out_dir: Path) -> Path:
+def release(assignment: Assignment, out_dir: Path, *, server: str | None = None) -> Path:
     """Write the student version of ``assignment`` into ``out_dir``.
 
     Parameters
@@ -122,6 +122,10 @@ def release(assignment: Assignment, out_dir: Path) -> Path:
     assignment : Assignment
     out_dir : Path
         Created if missing; must not be inside the assignment folder.
+    server : str, optional
+        The course's service (``https://...``), written into every released notebook's
+        metadata (``numgrade.server``) so that ``submit()`` in the notebook knows where
+        to send it.
 
     Returns
     -------
@@ -139,8 +143,14 @@ def release(assignment: Assignment, out_dir: Path) -> Path:
     if out_dir == assignment.root or _is_within(out_dir, assignment.root):
         raise AssignmentError(f"Release folder {out_dir} is inside the assignment folder "
                               f"{assignment.root}; choose a folder outside it.")
+    if server is not None and not server.startswith(("http://", "https://")):
+        raise UsageError(f"--server takes the address of the course's service, such as "
+                         f"https://grader.example.edu; got {server!r}.")
     templates = [(out_dir / nb.name, student_template(assignment, nb))
                  for nb in assignment.notebooks]
+    for _, nb in templates:
+        if server is not None:
+            nb.metadata["numgrade"] = {**nb.metadata.get("numgrade", {}), "server": server}
     out_dir.mkdir(parents=True, exist_ok=True)
     for target, nb in templates:
         nbformat.write(nb, str(target), version=4)
@@ -159,7 +169,8 @@ def release(assignment: Assignment, out_dir: Path) -> Path:
 _STUDENT_FOLDER = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.@+-]*$")
 
 
-def release_variants(assignment: Assignment, roster: Path, out_dir: Path) -> list[Path]:
+def release_variants(assignment: Assignment, roster: Path, out_dir: Path, *,
+                     server: str | None = None) -> list[Path]:
     """Release one copy per student of ``roster``: ``<out>/<student>/<notebook>`` with the
     notebook's parameters cell (tagged ``[variants] cell``) holding the student's variant.
 
@@ -178,7 +189,7 @@ def release_variants(assignment: Assignment, roster: Path, out_dir: Path) -> lis
                               "use ids of letters, digits and . _ - @ +.")
     out_dir = Path(out_dir).resolve()
     with tempfile.TemporaryDirectory(prefix="numgrade-release-") as scratch:
-        first = release(assignment, Path(scratch) / "release")
+        first = release(assignment, Path(scratch) / "release", server=server)
         template = nbformat.read(str(first), as_version=4)
         cells = [c for c in template.cells if spec.cell in c.get("metadata", {}).get("tags", [])]
         if len(cells) != 1:

@@ -94,3 +94,16 @@ def test_nothing_hidden_is_in_the_release_the_kernel_checks_from(tmp_path: Path)
     assert not any("hidden" in f or f.startswith(("reference", "examples")) for f in files), files
     hidden = {p.name for p in (ROOT / "assignments" / "hull" / "checks" / "hidden").glob("*.py")}
     assert hidden and not hidden & {Path(f).name for f in files}
+
+
+def test_the_release_says_where_submit_sends(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from autograder.errors import UsageError
+    from autograder.student import inline
+
+    notebook = api.release("hull", out=tmp_path / "hull", server="https://grader.example.edu")
+    assert nbformat.read(notebook, as_version=4).metadata["numgrade"]["server"] == \
+        "https://grader.example.edu"
+    monkeypatch.delenv("AUTOGRADER_SERVER", raising=False)
+    assert inline._metadata_server(notebook) == "https://grader.example.edu"
+    with pytest.raises(UsageError, match="address of the course's service"):
+        api.release("hull", out=tmp_path / "again", server="grader.example.edu")
