@@ -25,7 +25,7 @@ from autograder.service.course import AssignmentPolicy
 from autograder.service.intake import accept, precheck
 from autograder.service.models import Submission, utcnow
 from autograder.service.pages_review import people_context
-from autograder.service.released import released_notebook
+from autograder.service.released import released_notebook, students_notebook
 from autograder.service.standing import standing, time_left
 from autograder.service.web import (
     LOGIN_COOKIE,
@@ -195,8 +195,15 @@ async def released(who: SignedIn, policy: Assignment, svc: ServiceState) -> Resp
                                  "its notebook can be downloaded from then on.")
     try:
         path = await run_in_threadpool(released_notebook, policy, svc.course.data_dir)
+        own = None if who.staff else await run_in_threadpool(
+            students_notebook, policy, svc.course.data_dir, who.id)
+    except LookupError as exc:  # not on the roster of variants
+        raise HTTPException(403, str(exc)) from None
     except (UsageError, subprocess.TimeoutExpired) as exc:
         raise HTTPException(503, f"{exc} Tell your instructor; try again later.") from None
+    if own is not None:  # a variants assignment: this student's own parameters
+        return Response(own, media_type="application/x-ipynb+json", headers={
+            "Content-Disposition": f'attachment; filename="{path.name}"'})
     return FileResponse(path, media_type="application/x-ipynb+json", filename=path.name)
 
 

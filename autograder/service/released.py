@@ -7,6 +7,11 @@ process, with its check that no solution or hidden check is left in the output.
 It is kept under ``<data>/released/<name>/<sha>/``, where ``sha`` covers every
 file of the assignment folder: an edited notebook or check makes a new release
 at the next download, never a stale one.
+
+An assignment with per-student variants (``[variants]``) hands each student the
+released notebook with its parameters cell holding their own parameters, drawn
+on the trusted side from the course secret (:mod:`autograder.engine.variants`),
+as ``autograder release --variants`` writes it.
 """
 
 from __future__ import annotations
@@ -18,7 +23,10 @@ import sys
 import tempfile
 from pathlib import Path
 
+import nbformat
+
 from autograder.engine.assignment import Assignment, load_assignment
+from autograder.engine.variants import parameters_source
 from autograder.errors import UsageError
 from autograder.service.course import AssignmentPolicy
 
@@ -66,3 +74,31 @@ def released_notebook(policy: AssignmentPolicy, data_dir: Path) -> Path:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return target
+
+
+def students_notebook(policy: AssignmentPolicy, data_dir: Path, student: str) -> bytes | None:
+    """``student``'s own notebook of a variants assignment (``None``: the assignment has no
+    variants, everyone gets the released notebook).
+
+    Raises
+    ------
+    LookupError
+        The student is not on the variants roster.
+    UsageError
+        The notebook has no single parameters cell.
+    """
+    assignment = load_assignment(policy.spec)
+    spec = assignment.variants
+    if spec is None:
+        return None
+    variant = spec.lookup(assignment.name, student)
+    if variant is None:
+        raise LookupError(f"{policy.title} gives every student their own problem, and {student!r} "
+                         "is not on its roster of variants; ask your instructor to add you.")
+    book = nbformat.read(str(released_notebook(policy, data_dir)), as_version=4)
+    cells = [c for c in book.cells if spec.cell in c.get("metadata", {}).get("tags", [])]
+    if len(cells) != 1:
+        raise UsageError(f"The notebook of {policy.name!r} has {len(cells)} cells tagged "
+                         f"{spec.cell!r}; it needs exactly one (its parameters cell).")
+    cells[0].source = parameters_source(variant)
+    return nbformat.writes(book).encode()
