@@ -24,7 +24,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from autograder.engine.assignment import Assignment, load_assignment
 from autograder.engine.identify import identify
 from autograder.engine.notebook import Notebook, parse_notebook
-from autograder.engine.submission import open_submission
+from autograder.engine.submission import ZipLimits, open_submission
 from autograder.errors import AssignmentError, NotebookError, UploadRejected
 from autograder.service import jobqueue
 from autograder.service.course import AssignmentPolicy, Course
@@ -126,7 +126,11 @@ def check_zip(data: bytes, max_bytes: int, policy: AssignmentPolicy) -> None:
     with tempfile.TemporaryDirectory(prefix="numgrade-upload-") as scratch:
         archive = Path(scratch) / "upload.zip"
         archive.write_bytes(data)
-        submission = open_submission(archive, assignment.notebooks, scratch=Path(scratch))
+        # what the service unpacks for one upload: at most 20 uploads' worth (the grader,
+        # later, applies its own limits, which are wider)
+        limits = ZipLimits(max_total_bytes=min(ZipLimits().max_total_bytes, 20 * max_bytes))
+        submission = open_submission(archive, assignment.notebooks, scratch=Path(scratch),
+                                     limits=limits)
         if submission.problem:
             raise UploadRejected(f"This zip was not accepted: {submission.problem} Nothing was "
                                  "stored.", status=422)
