@@ -193,6 +193,7 @@ class Platform:
         app.post("/lineitems/{item}/scores")(self._score)
         app.get("/lineitems/{item}")(self._lineitem)
         app.get("/memberships")(self._members)
+        app.get("/gradebook")(self._gradebook)
         app.post("/deep-link-return")(self._deep_link_return)
         return app
 
@@ -262,6 +263,22 @@ class Platform:
             raise HTTPException(404, "no such line item")
         self.course.scores.setdefault(item, []).append(await request.json())
         return JSONResponse({})
+
+    def _gradebook(self) -> Response:
+        """The LMS gradebook a person reads: each line item with the last score per user."""
+        import html
+
+        rows = []
+        for item, line in self.course.lineitems.items():
+            last = {s.get("userId"): s for s in self.course.scores.get(item, [])}
+            for user, score in sorted(last.items()):
+                rows.append(f"<tr><td>{html.escape(str(line.get('label', item)))}</td>"
+                            f"<td>{html.escape(str(user))}</td>"
+                            f"<td class='score'>{score.get('scoreGiven')} / "
+                            f"{score.get('scoreMaximum')}</td></tr>")
+        return HTMLResponse("<!doctype html><title>Gradebook</title><h1>Gradebook</h1>"
+                            "<table><tr><th>item</th><th>user</th><th>score</th></tr>"
+                            + "".join(rows) + "</table>")
 
     def _lineitem(self, item: str, request: Request) -> Response:
         return JSONResponse({"id": f"{self.url}/lineitems/{item}", **self.course.lineitems[item]})

@@ -134,6 +134,10 @@ def test_deep_link_launch_upload_and_score(lti: tuple[support.Server, Platform],
     assert sent["scoreGiven"] == pytest.approx(score)
     assert sent["userId"] == "student-1" and sent["gradingProgress"] == "FullyGraded"
     assert sent["activityProgress"] == "Completed" and sent["timestamp"]
+    # what the instructor reads in the platform's gradebook (docs/lti.md, "Trying it locally")
+    browser.open(f"{platform.url}/gradebook")
+    row = next(line for line in browser.text("table").splitlines() if "student-1" in line)
+    assert f"{sent['scoreGiven']} / 36" in row
 
 
 @pytest.mark.browser
