@@ -196,7 +196,7 @@ async def released(who: SignedIn, policy: Assignment, svc: ServiceState) -> Resp
     try:
         path = await run_in_threadpool(released_notebook, policy, svc.course.data_dir)
         own = None if who.staff else await run_in_threadpool(
-            students_notebook, policy, svc.course.data_dir, who.id)
+            students_notebook, policy, path, who.id)
     except LookupError as exc:  # not on the roster of variants
         raise HTTPException(403, str(exc)) from None
     except (UsageError, subprocess.TimeoutExpired) as exc:

@@ -76,9 +76,10 @@ def released_notebook(policy: AssignmentPolicy, data_dir: Path) -> Path:
     return target
 
 
-def students_notebook(policy: AssignmentPolicy, data_dir: Path, student: str) -> bytes | None:
-    """``student``'s own notebook of a variants assignment (``None``: the assignment has no
-    variants, everyone gets the released notebook).
+def students_notebook(policy: AssignmentPolicy, released: Path, student: str) -> bytes | None:
+    """``student``'s own copy of the released notebook ``released`` (from
+    :func:`released_notebook`) for a variants assignment; ``None``: the assignment has no
+    variants, everyone gets ``released`` itself.
 
     Raises
     ------
@@ -95,7 +96,7 @@ def students_notebook(policy: AssignmentPolicy, data_dir: Path, student: str) ->
     if variant is None:
         raise LookupError(f"{policy.title} gives every student their own problem, and {student!r} "
                          "is not on its roster of variants; ask your instructor to add you.")
-    book = nbformat.read(str(released_notebook(policy, data_dir)), as_version=4)
+    book = nbformat.read(str(released), as_version=4)
     cells = [c for c in book.cells if spec.cell in c.get("metadata", {}).get("tags", [])]
     if len(cells) != 1:
         raise UsageError(f"The notebook of {policy.name!r} has {len(cells)} cells tagged "
