@@ -47,10 +47,20 @@ def forbidden_members(wheel: Path) -> list[str]:
     return [n for n in names if n.startswith(FORBIDDEN_TOP) or FORBIDDEN_PART in n.split("/")]
 
 
+class BuildInProgress(RuntimeError):
+    """Another request is building the wheel right now."""
+
+
 def build_student_wheel(out_dir: Path, source: Path = SOURCE) -> Path:
     """``out_dir/WHEEL``, built once from ``source`` (then reused until the version changes)."""
     target = out_dir / WHEEL
-    with _LOCK:
+    if target.is_file():
+        return target
+    # Never wait on a build in progress: a request (anyone may ask for the wheel) that
+    # waited would hold a worker thread, and enough of them would stall the service.
+    if not _LOCK.acquire(blocking=False):
+        raise BuildInProgress("the student package is being built; try again in a minute")
+    try:
         if target.is_file():
             return target
         if not (source / "pyproject.toml").is_file():
@@ -74,6 +84,8 @@ def build_student_wheel(out_dir: Path, source: Path = SOURCE) -> Path:
             if leaked:  # never served: the packaging would hand out what students must not see
                 raise RuntimeError(f"the student wheel would hold {leaked[:5]}; fix pyproject.toml")
             shutil.move(str(built), target)
+    finally:
+        _LOCK.release()
     return target
 
 
@@ -100,6 +112,8 @@ async def student_wheel(filename: str, service: ServiceState) -> FileResponse:
         raise HTTPException(404, f"No such file; the package is /install/{WHEEL}.")
     try:
         wheel = await run_in_threadpool(build_student_wheel, service.course.data_dir / "install")
+    except BuildInProgress as exc:
+        raise HTTPException(503, f"{exc}.", headers={"Retry-After": "60"}) from None
     except (FileNotFoundError, RuntimeError, subprocess.SubprocessError) as exc:
         raise HTTPException(503, f"The student package cannot be built here: {exc}.") from None
     return FileResponse(wheel, media_type="application/octet-stream", filename=WHEEL)

@@ -105,3 +105,17 @@ def test_a_wrong_token_is_a_message_not_a_traceback(tmp_path: Path) -> None:
                               capture_output=True, text=True, timeout=120)
         assert done.returncode != 0 and "Traceback" not in done.stderr, done.stderr
         assert "service" in done.stderr or "http" in done.stderr
+
+
+def test_a_request_during_a_build_is_told_to_retry_and_never_waits(tmp_path: Path) -> None:
+    """Anyone may ask for the wheel: a request that waited for a build in progress would hold
+    a worker thread, and enough of them would stall the service."""
+    from autograder.service import install
+
+    assert install._LOCK.acquire(blocking=False)
+    try:
+        with pytest.raises(install.BuildInProgress, match="being built"):
+            install.build_student_wheel(tmp_path / "install")
+    finally:
+        install._LOCK.release()
+    assert not (tmp_path / "install").exists()
