@@ -175,13 +175,19 @@ def release_variants(assignment: Assignment, roster: Path, out_dir: Path, *,
     notebook's parameters cell (tagged ``[variants] cell``) holding the student's variant.
 
     Returns the notebooks written, in roster order. Raises :class:`AssignmentError`
-    when the assignment declares no variants, its notebook has no parameters cell,
-    or a student id cannot be a folder name.
+    when the assignment declares no variants, the course secret is not set, its
+    notebook has no parameters cell, or a student id cannot be a folder name.
     """
     spec = assignment.variants
     if spec is None:
         raise AssignmentError(f"{assignment.root}/assignment.toml has no [variants] table; "
                               "declare the parameters before releasing with --variants.")
+    if not spec.active():
+        raise AssignmentError(f"--variants draws each student's parameters from the course "
+                              f"secret, and {spec.secret_env} is not set: set it to a long "
+                              "random string, keep it for the whole course, and give the "
+                              "grader the same one (without it every student gets the "
+                              "instructor's values: release without --variants).")
     students = read_roster(Path(roster))
     bad = [s for s in students if not _STUDENT_FOLDER.match(s) or ".." in s]
     if bad:

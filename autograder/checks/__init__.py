@@ -4,7 +4,8 @@ An assignment's checks are ordinary pytest functions over the fixtures of
 :mod:`autograder.engine.plugin`. This module gives them:
 
 * the fixtures' types, for annotations: :class:`Student` (``student``),
-  :class:`Credit` (``credit``), :class:`Feedback` (``feedback``);
+  :class:`Credit` (``credit``), :class:`Feedback` (``feedback``),
+  :class:`VariantView` (``variant``: the student's parameters);
 * :class:`CheckFailure` and the staged comparisons of :mod:`autograder.checks.compare_arrays`
   (:func:`expect_array`, :func:`expect_close`, :func:`expect_equal`,
   :func:`expect_indices`, :func:`expect_int`, :func:`expect_number`,
@@ -86,7 +87,7 @@ from autograder.checks.compare_curves import (
     decode_png,
     render_side_by_side,
 )
-from autograder.engine.plugin import Credit, Feedback
+from autograder.engine.plugin import Credit, Feedback, VariantView
 from autograder.engine.proxy import Student
 from autograder.errors import CheckFailure, StudentException
 
@@ -99,6 +100,7 @@ __all__ = [
     "Feedback",
     "FigureData",
     "Student",
+    "VariantView",
     "call_for_figure",
     "curve_pieces",
     "curve_points",

@@ -368,7 +368,8 @@ def _build(root: Path, toml_path: Path, config: dict[str, Any]) -> Assignment:
             + (", or autograder test cells with points to the notebooks." if parts else "."))
     timeouts, limits = _limits(toml_path, config)
     extra: dict[str, Any] = {"requirements": requirements,
-                             "variants": parse_variants(root, toml_path, config.get("variants")),
+                             "variants": parse_variants(root, toml_path, config.get("variants"),
+                                                         notebook),
                              "deadline": _deadline(toml_path, config)}
     if otter is not None:
         extra["cell_tests"] = otter[0]

@@ -25,6 +25,9 @@ Declared in ``assignment.toml`` (all keys optional but ``params`` or a hook)::
     [variants.fixed.correct]     # an id with fixed parameters (the examples)
     n = 7
 
+or ``fixed = ["solution", "template"]``: ids graded with the instructor's values, the
+parameters cell of the instructor notebook as written (plain literals: ``n = 7``).
+
 A ``variants.py`` beside ``assignment.toml`` may define ``draw(rng) -> dict`` (more
 parameters, drawn after the table's) and ``answers(params) -> dict`` (the expected
 value of each varied quantity, used to see answers that travel). It runs on the
@@ -32,26 +35,32 @@ trusted side only; the folder is never readable by student code.
 
 The seed of a student is an HMAC of the assignment name and the student id keyed by
 the course secret: without the secret a student cannot compute a classmate's variant.
+With no secret set, variants are off: every id is graded with the instructor's values
+(the notebook as ``autograder release`` writes it without ``--variants``), and
+``release --variants`` refuses to draw.
 """
 
 from __future__ import annotations
 
+import ast
 import csv
 import hashlib
 import hmac
 import importlib.util
 import os
+import pprint
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Callable, Mapping, Sequence
 
+import nbformat
 import numpy as np
 
 from autograder.errors import AssignmentError
 
 __all__ = ["Variant", "VariantSpec", "parse_variants", "read_roster", "parameters_source",
-           "travel_evidence", "VARIANT_TAG"]
+           "travel_evidence", "instructor_values", "VARIANT_TAG"]
 
 VARIANT_TAG = "variant"
 _KEYS = ("params", "roster", "cell", "secret_env", "fixed")
@@ -67,7 +76,8 @@ class Variant:
     """One student's parameters, the seed they were drawn from, and who they belong to."""
 
     student: str
-    seed: int
+    #: None: not drawn (a fixed id, or the instructor's values because no secret is set)
+    seed: int | None
     params: tuple[tuple[str, Any], ...]
 
     def __getitem__(self, name: str) -> Any:
@@ -91,6 +101,12 @@ class VariantSpec:
     secret_env: str = "NUMGRADE_VARIANT_SECRET"
     fixed: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
     hook: Path | None = field(default=None, compare=False)
+    #: the parameters cell of the instructor notebook as written
+    instructor: tuple[tuple[str, Any], ...] = ()
+
+    def active(self) -> bool:
+        """Whether the course secret is set: without it every id gets the instructor's values."""
+        return bool(os.environ.get(self.secret_env, ""))
 
     def seed(self, assignment: str, student: str) -> int:
         secret = os.environ.get(self.secret_env, "").encode()
@@ -99,10 +115,12 @@ class VariantSpec:
 
     def draw(self, assignment: str, student: str) -> Variant:
         """``student``'s variant, whether or not the student is on the roster."""
-        seed = self.seed(assignment, student)
         fixed = dict(self.fixed)
         if student in fixed:
-            return Variant(student, seed, fixed[student])
+            return Variant(student, None, fixed[student])
+        if not self.active():
+            return Variant(student, None, self.instructor)
+        seed = self.seed(assignment, student)
         rng = np.random.default_rng(seed)
         drawn = {name: _draw_one(rng, spec) for name, spec in self.params}
         module = _hook(self.hook)
@@ -119,7 +137,10 @@ class VariantSpec:
         return None if self.roster is None else read_roster(self.roster)
 
     def lookup(self, assignment: str, student: str) -> Variant | None:
-        """``student``'s variant, or ``None`` when a roster is declared and they are not on it."""
+        """``student``'s variant, or ``None`` when a roster is declared and they are not on it
+        (with no secret set, everyone's is the instructor's values)."""
+        if not self.active():
+            return self.draw(assignment, student)
         roster = self.students()
         if roster is not None and student not in roster and student not in dict(self.fixed):
             return None
@@ -190,8 +211,13 @@ def read_roster(path: Path) -> tuple[str, ...]:
     return tuple(dict.fromkeys(r[original].strip() for r in rows if (r[original] or "").strip()))
 
 
-def parse_variants(root: Path, toml_path: Path, table: Any) -> VariantSpec | None:
-    """The ``[variants]`` table checked (every mistake names the key and the fix)."""
+def parse_variants(root: Path, toml_path: Path, table: Any,
+                   notebook: Path | None = None) -> VariantSpec | None:
+    """The ``[variants]`` table checked (every mistake names the key and the fix).
+
+    ``notebook``: the instructor notebook, whose parameters cell gives the instructor's
+    values (ids in a ``fixed`` list, and everyone when no secret is set).
+    """
     hook = root / "variants.py"
     if table is None:
         return None
@@ -212,12 +238,54 @@ def parse_variants(root: Path, toml_path: Path, table: Any) -> VariantSpec | Non
         if not roster.is_file():
             raise AssignmentError(f"{toml_path}: [variants] roster {table['roster']!r} was not "
                                   f"found in {root}; give a CSV of student ids.")
-    fixed = tuple((str(student), tuple((str(k), v) for k, v in dict(values).items()))
-                  for student, values in dict(table.get("fixed", {})).items())
-    return VariantSpec(root=root, params=params, roster=roster,
-                       cell=str(table.get("cell", VARIANT_TAG)),
+    cell = str(table.get("cell", VARIANT_TAG))
+    instructor = instructor_values(notebook, cell) if notebook is not None else ()
+    given = table.get("fixed", {})
+    if isinstance(given, list):  # ids graded with the instructor's values
+        fixed = tuple((str(student), instructor) for student in given)
+    elif isinstance(given, dict):
+        fixed = tuple((str(student), tuple((str(k), v) for k, v in dict(values).items()))
+                      for student, values in given.items())
+    else:
+        raise AssignmentError(f"{toml_path}: [variants] fixed must be a list of ids (graded "
+                              "with the instructor notebook's values) or tables "
+                              "[variants.fixed.ID] of parameters.")
+    return VariantSpec(root=root, params=params, roster=roster, cell=cell,
                        secret_env=str(table.get("secret_env", "NUMGRADE_VARIANT_SECRET")),
-                       fixed=fixed, hook=hook if hook.is_file() else None)
+                       fixed=fixed, hook=hook if hook.is_file() else None,
+                       instructor=instructor)
+
+
+def instructor_values(notebook: Path, cell: str) -> tuple[tuple[str, Any], ...]:
+    """The parameters cell (tagged ``cell``) of the instructor notebook: ``name = literal``
+    lines, read with :func:`ast.literal_eval` (never run). Empty without such a cell."""
+    try:
+        book = nbformat.read(str(notebook), as_version=4)
+    except Exception:  # nbformat raises many types; load_assignment reports a bad notebook
+        return ()
+    found = [c for c in book.cells if c.cell_type == "code"
+             and cell in c.get("metadata", {}).get("tags", [])]
+    if len(found) != 1:
+        return ()
+    values: dict[str, Any] = {}
+    try:
+        body = ast.parse(found[0].source).body
+    except SyntaxError as exc:
+        raise AssignmentError(f"{notebook}: the parameters cell (tagged {cell!r}) is not "
+                              f"valid Python (line {exc.lineno}: {exc.msg}).") from None
+    for node in body:
+        target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 \
+            else None
+        try:
+            if not isinstance(target, ast.Name):
+                raise ValueError
+            values[target.id] = ast.literal_eval(node.value)  # type: ignore[union-attr]
+        except ValueError:
+            raise AssignmentError(
+                f"{notebook}: the parameters cell (tagged {cell!r}) may only set names to "
+                f"plain values (numbers, strings, lists), one `name = value` per line; line "
+                f"{node.lineno} is not one.") from None
+    return tuple(values.items())
 
 
 def _param(toml_path: Path, name: str, spec: Any) -> dict[str, Any]:
@@ -246,7 +314,9 @@ def parameters_source(variant: Variant) -> str:
     """The parameters cell of ``variant``'s notebook: one assignment per parameter."""
     lines = [f"# Your parameters (drawn for {variant.student}). Do not change them: the "
              "grader uses these values."]
-    lines += [f"{name} = {value!r}" for name, value in variant.params]
+    # pprint breaks long lists (a point set) over lines; the text stays a Python literal
+    lines += [f"{name} = {pprint.pformat(value, width=88, compact=True)}"
+              for name, value in variant.params]
     return "\n".join(lines) + "\n"
 
 
@@ -275,12 +345,26 @@ def travel_evidence(own: Variant, observed: Mapping[str, Any], others: Sequence[
             if name in theirs and name in mine and not _same(value, mine[name]) \
                     and _same(value, theirs[name]):
                 found.append(f"{name} = {_short(value)} is the answer of {other.student}'s "
-                             f"variant ({_short(dict(other.params))}), not of this "
-                             f"student's ({_short(dict(own.params))}, expected "
-                             f"{_short(mine[name])})")
+                             f"variant{_params(other)}, not of this student's"
+                             f"{_params(own)} (expected {_short(mine[name])})")
     return found
 
 
+def _params(variant: Variant) -> str:
+    """`` (a=3)``: a variant's parameters when they are short enough to read in a line
+    (a point set of 31 pins is not: the variant's owner names it)."""
+    text = ", ".join(f"{k}={_short(v)}" for k, v in variant.params)
+    return f" ({text})" if len(text) <= 60 else ""
+
+
 def _short(value: Any) -> str:
-    text = repr(_plain(value))
+    value = _plain(value)
+    try:  # outputs are recorded as floats: indices 3.0, 7.0 read better as 3, 7
+        array = np.asarray(value, dtype=float)
+        if array.size and np.all(np.isfinite(array)) and np.all(array == np.round(array)) \
+                and np.all(np.abs(array) < 2**53):
+            value = array.astype(np.int64).tolist()
+    except (TypeError, ValueError):
+        pass
+    text = repr(value)
     return text if len(text) <= 120 else text[:117] + "..."

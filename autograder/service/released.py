@@ -79,7 +79,7 @@ def released_notebook(policy: AssignmentPolicy, data_dir: Path) -> Path:
 def students_notebook(policy: AssignmentPolicy, released: Path, student: str) -> bytes | None:
     """``student``'s own copy of the released notebook ``released`` (from
     :func:`released_notebook`) for a variants assignment; ``None``: the assignment has no
-    variants, everyone gets ``released`` itself.
+    variants, or no course secret is set: everyone gets ``released`` itself.
 
     Raises
     ------
@@ -90,7 +90,7 @@ def students_notebook(policy: AssignmentPolicy, released: Path, student: str) ->
     """
     assignment = load_assignment(policy.spec)
     spec = assignment.variants
-    if spec is None:
+    if spec is None or not spec.active():  # no secret: everyone has the instructor's values
         return None
     variant = spec.lookup(assignment.name, student)
     if variant is None:

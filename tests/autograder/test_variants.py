@@ -165,3 +165,51 @@ def test_release_without_a_parameters_cell_says_so(tmp_path: Path, secret: None)
     nbformat.write(nb, str(folder / "scaled.ipynb"))
     with pytest.raises(AssignmentError, match="tagged 'variant'"):
         release_variants(load_assignment(folder), folder / "roster.csv", tmp_path / "out")
+
+
+def test_without_the_secret_every_id_has_the_instructors_values(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("NUMGRADE_VARIANT_SECRET", raising=False)
+    assignment = load_assignment(write_scaled(tmp_path / "src"))
+    for student in ("ada", "stranger"):  # on the roster or not: variants are off
+        variant = assignment.variants.lookup("scaled", student)
+        assert variant is not None and variant.to_dict() == {
+            "student": student, "seed": None, "params": {"a": 3}}
+    with pytest.raises(AssignmentError, match="NUMGRADE_VARIANT_SECRET is not set"):
+        release_variants(assignment, assignment.root / "roster.csv", tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    ada = tmp_path / "ada.ipynb"
+    ada.write_bytes((assignment.root / "scaled.ipynb").read_bytes())
+    answered(ada, SOLUTION)
+    with Grader(assignment) as grader:
+        result = grader.grade(ada, id="ada")
+    assert result.score == 1.0 and result.variant == {"student": "ada", "seed": None,
+                                                      "params": {"a": 3}}
+
+
+def test_a_list_of_fixed_ids_gets_the_parameters_cell_as_written(tmp_path: Path,
+                                                                 secret: None) -> None:
+    folder = write_scaled(tmp_path / "src")
+    toml = folder / "assignment.toml"
+    toml.write_text(toml.read_text().replace('[variants.fixed.example]\na = 3\n', '')
+                    .replace('roster = "roster.csv"\n',
+                             'roster = "roster.csv"\nfixed = ["example", "solution"]\n'))
+    spec = load_assignment(folder).variants
+    assert spec.instructor == (("a", 3),)
+    assert spec.lookup("scaled", "solution").to_dict() == {
+        "student": "solution", "seed": None, "params": {"a": 3}}
+    assert spec.lookup("scaled", "ada")["a"] == spec.draw("scaled", "ada")["a"]
+
+
+@pytest.mark.parametrize("cell, message", [
+    ("a = 3\nb = len('xy')\n", "line 2 is not one"),
+    ("a = (\n", "is not valid Python"),
+])
+def test_a_parameters_cell_of_code_names_the_line(tmp_path: Path, cell: str,
+                                                  message: str) -> None:
+    folder = write_scaled(tmp_path / "src")
+    nb = nbformat.read(str(folder / "scaled.ipynb"), as_version=4)
+    nb.cells[0].source = cell
+    nbformat.write(nb, str(folder / "scaled.ipynb"))
+    with pytest.raises(AssignmentError, match=message):
+        load_assignment(folder)

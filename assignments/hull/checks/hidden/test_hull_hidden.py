@@ -11,6 +11,11 @@ the oracle is also cross-checked with ``scipy.spatial.ConvexHull``.
 Sets named ``unseen-*`` are drawn from the ``rng`` fixture: a regrade draws
 the same points, another submission draws others.
 
+The student's own board: ``pins`` is drawn per student (``variants.py``); the
+check calls ``convex_hull`` on the student's pins, computes the expected hull
+here from ``reference`` and records the answer, so a hull that is a
+classmate's answer rather than the student's own is seen.
+
 References
 ----------
 L. Kettner, K. Mehlhorn, S. Pion, S. Schirra, C. Yap, "Classroom examples of
@@ -24,8 +29,10 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-import hull_feedback as feedback  # checks/public/hull_feedback.py: on sys.path while checks run
-from autograder.checks import Credit, Dataset, Student, over_datasets, same_cycle
+import hull_feedback  # checks/public/hull_feedback.py: on sys.path while checks run
+import hull_feedback as feedback
+from autograder.checks import (Credit, Dataset, Feedback, Student, VariantView, over_datasets,
+                               same_cycle)
 from reference import convex_hull as reference_hull, orient2d
 
 Point = tuple[float, float]
@@ -331,3 +338,16 @@ def test_convex_hull(student: Student, credit: Credit, rng: np.random.Generator,
         feedback.require_general_case(student.convex_hull, f"{name} case")
     got = student.convex_hull(points)
     feedback.grade_hull(got, points, expected, boundary, credit)
+
+
+@pytest.mark.points(2)
+@pytest.mark.visibility("input")  # the student sees which board, never the expected hull
+def test_convex_hull_your_pins(student: Student, credit: Credit, variant: VariantView,
+                               feedback: Feedback) -> None:
+    points = np.array(variant["pins"], dtype=float)
+    feedback.input(f"convex_hull(pins) with the {len(points)} pins of your notebook's "
+                   "parameters cell (your own board)")
+    expected, boundary = oracle(points, scipy_unique=True)
+    got = student.convex_hull(points)
+    variant.record("pins_hull", got)
+    hull_feedback.grade_hull(got, points, expected, boundary, credit)
