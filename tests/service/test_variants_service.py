@@ -1,12 +1,15 @@
 """Per-student variants through the service: each student downloads their own problem,
 both right answers get full marks, and a student off the roster of variants is told so.
 
-The assignment is the test-written ``scaled`` of ``tests/autograder/test_variants.py``:
-``scaled(x)`` multiplies by the student's parameter ``a``, drawn from the course secret.
+The assignments are the test-written ``scaled`` of ``tests/autograder/test_variants.py``
+(``scaled(x)`` multiplies by the student's parameter ``a``, drawn from the course secret)
+and the shipped ``hull`` (every student their own board of pins), where a copied hull
+is recorded with its evidence.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from pathlib import Path
@@ -14,13 +17,35 @@ from typing import Iterator
 
 import httpx
 import nbformat
+import numpy as np
 import pytest
 import svc_support as support
 
 from autograder.engine.assignment import load_assignment
+from reference import convex_hull
+from tests.autograder.test_hull_variants import HULL, parameters, with_model_solution
 from tests.autograder.test_variants import SOLUTION, write_scaled
 
 SECRET = "the service test's course secret"
+
+
+@contextlib.contextmanager
+def serving(folder: Path, body: str, students: tuple[str, ...]) -> Iterator[support.Server]:
+    """A course server with the course secret in its environment (and this test's)."""
+    course = support.write_course(folder, body=body, roster=[
+        (s, s.title(), f"{s}@uni", "student") for s in students])
+    before = os.environ.get("NUMGRADE_VARIANT_SECRET")
+    os.environ["NUMGRADE_VARIANT_SECRET"] = SECRET  # the server's and this test's
+    server = support.Server(course, f"sqlite:///{folder / 'db.sqlite3'}", jobs=1)
+    server.start()
+    try:
+        yield server
+    finally:
+        server.stop()
+        if before is None:
+            os.environ.pop("NUMGRADE_VARIANT_SECRET", None)
+        else:
+            os.environ["NUMGRADE_VARIANT_SECRET"] = before
 
 
 @pytest.fixture(scope="module")
@@ -39,25 +64,13 @@ assignment = "./scaled"
 opens = 2020-01-01T00:00:00Z
 deadline = 2099-01-01T00:00:00Z
 """
-    course = support.write_course(folder, body=body, roster=[
-        ("ada", "Ada", "ada@uni", "student"), ("bob", "Bob", "bob@uni", "student"),
-        ("carl", "Carl", "carl@uni", "student")])
-    before = os.environ.get("NUMGRADE_VARIANT_SECRET")
-    os.environ["NUMGRADE_VARIANT_SECRET"] = SECRET  # the server's and this test's
-    server = support.Server(course, f"sqlite:///{folder / 'db.sqlite3'}", jobs=1)
-    server.start()
-    try:
+    with serving(folder, body, ("ada", "bob", "carl")) as server:
         yield server, source
-    finally:
-        server.stop()
-        if before is None:
-            os.environ.pop("NUMGRADE_VARIANT_SECRET", None)
-        else:
-            os.environ["NUMGRADE_VARIANT_SECRET"] = before
 
 
-def _download(client: httpx.Client, server: support.Server, who: str) -> httpx.Response:
-    return client.get(f"{server.url}/assignments/scaled/notebook",
+def _download(client: httpx.Client, server: support.Server, who: str,
+              name: str = "scaled") -> httpx.Response:
+    return client.get(f"{server.url}/assignments/{name}/notebook",
                       headers={"Authorization": f"Bearer {server.tokens()[who]}"})
 
 
@@ -92,3 +105,56 @@ def test_a_student_off_the_roster_of_variants_is_told_so(
         answer = _download(client, server, "carl")
     assert answer.status_code == 403
     assert "not on its roster of variants" in answer.text
+
+
+@pytest.fixture(scope="module")
+def hull(tmp_path_factory: pytest.TempPathFactory) -> Iterator[support.Server]:
+    folder = tmp_path_factory.mktemp("hull-variants")
+    body = f"""
+[course]
+name = "Hull variants course"
+roster = "roster.csv"
+data = "data"
+
+[[assignment]]
+name = "hull"
+assignment = "{HULL}"
+opens = 2020-01-01T00:00:00Z
+deadline = 2099-01-01T00:00:00Z
+"""
+    with serving(folder, body, ("alice", "bob", "carol")) as server:  # on hull's roster.csv
+        yield server
+
+
+def test_hull_boards_through_the_service_and_a_copied_hull_is_recorded(
+        hull: support.Server) -> None:
+    server = hull
+    books, pins = {}, {}
+    with httpx.Client(timeout=300) as client:
+        for student in ("alice", "bob", "carol"):
+            answer = _download(client, server, student, "hull")
+            assert answer.status_code == 200, answer.text
+            books[student] = Path(server.course.parent / f"{student}-hull.ipynb")
+            books[student].write_text(answer.text)
+            pins[student] = parameters(books[student])["pins"]
+        assert pins["alice"] != pins["bob"] != pins["carol"]
+        alices = [int(i) for i in convex_hull(np.array(pins["alice"]))]
+        copied = ("_march = convex_hull\n\n\ndef convex_hull(points):\n"
+                  f"    if len(points) == 31:\n        return {alices}\n    return _march(points)\n")
+        views = {}
+        for student in ("alice", "bob", "carol"):
+            book = with_model_solution(books[student], copied if student == "carol" else "")
+            sub = support.upload(client, server.url, server.tokens()[student], "hull",
+                                 nbformat.writes(book).encode(), name="hull.ipynb")
+            assert sub.status_code == 201, sub.text
+            views[student] = support.wait_graded(client, server.url, server.tokens()[student],
+                                                 sub.json()["id"])
+    for student in ("alice", "bob"):
+        assert views[student]["score"] == views[student]["max_score"] == 38, views[student]
+    assert views["carol"]["score"] < views["carol"]["max_score"]
+    found = [json.loads(p.read_text()) for p in
+             (server.course.parent / "data").rglob("results.json")]
+    stored = {r["extra_data"]["id"]: r for r in found}
+    assert stored["alice"]["extra_data"]["variant"]["params"] == {"pins": pins["alice"]}
+    notes = " ".join(stored["carol"]["extra_data"].get("notes", []))
+    assert f"{alices} is the answer of alice's variant" in notes, stored["carol"]
