@@ -10,6 +10,7 @@ is recorded with its evidence.
 from __future__ import annotations
 
 import contextlib
+import html
 import json
 import os
 from pathlib import Path
@@ -33,7 +34,8 @@ SECRET = "the service test's course secret"
 def serving(folder: Path, body: str, students: tuple[str, ...]) -> Iterator[support.Server]:
     """A course server with the course secret in its environment (and this test's)."""
     course = support.write_course(folder, body=body, roster=[
-        (s, s.title(), f"{s}@uni", "student") for s in students])
+        (s, s.title(), f"{s}@uni", "student") for s in students]
+        + [("prof", "Prof", "prof@uni", "instructor")])
     before = os.environ.get("NUMGRADE_VARIANT_SECRET")
     os.environ["NUMGRADE_VARIANT_SECRET"] = SECRET  # the server's and this test's
     server = support.Server(course, f"sqlite:///{folder / 'db.sqlite3'}", jobs=1)
@@ -158,3 +160,11 @@ def test_hull_boards_through_the_service_and_a_copied_hull_is_recorded(
     assert stored["alice"]["extra_data"]["variant"]["params"] == {"pins": pins["alice"]}
     notes = " ".join(stored["carol"]["extra_data"].get("notes", []))
     assert f"{alices} is the answer of alice's variant" in notes, stored["carol"]
+    # the instructor's class summary lists carol under "needs a person", with the evidence
+    with httpx.Client(timeout=60) as client:
+        page = client.get(f"{server.url}/instructor/hull/summary/",
+                          headers={"Authorization": f"Bearer {server.tokens()['prof']}"})
+    assert page.status_code == 200
+    text = html.unescape(page.text)
+    assert f"{alices} is the answer of alice's variant" in text
+    assert text.count("is the answer of") == 1  # carol only: alice and bob are honest
