@@ -242,6 +242,11 @@ def parse_variants(root: Path, toml_path: Path, table: Any,
     instructor = instructor_values(notebook, cell) if notebook is not None else ()
     given = table.get("fixed", {})
     if isinstance(given, list):  # ids graded with the instructor's values
+        if not instructor:
+            raise AssignmentError(f"{toml_path}: [variants] fixed = [...] grades those ids "
+                                  "with the instructor's values, and the instructor notebook "
+                                  f"has no code cell tagged {cell!r} setting them; tag the "
+                                  "parameters cell, or give [variants.fixed.ID] tables.")
         fixed = tuple((str(student), instructor) for student in given)
     elif isinstance(given, dict):
         fixed = tuple((str(student), tuple((str(k), v) for k, v in dict(values).items()))

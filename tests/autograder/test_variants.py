@@ -199,6 +199,11 @@ def test_a_list_of_fixed_ids_gets_the_parameters_cell_as_written(tmp_path: Path,
     assert spec.lookup("scaled", "solution").to_dict() == {
         "student": "solution", "seed": None, "params": {"a": 3}}
     assert spec.lookup("scaled", "ada")["a"] == spec.draw("scaled", "ada")["a"]
+    nb = nbformat.read(str(folder / "scaled.ipynb"), as_version=4)
+    nb.cells[0].metadata = {}  # no parameters cell: the list has no values to give
+    nbformat.write(nb, str(folder / "scaled.ipynb"))
+    with pytest.raises(AssignmentError, match="no code cell tagged 'variant'"):
+        load_assignment(folder)
 
 
 @pytest.mark.parametrize("cell, message", [
