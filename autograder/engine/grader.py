@@ -52,7 +52,8 @@ from autograder.engine.student_process import (
     check_cell_count,
     wall_limit,
 )
-from autograder.engine.variants import Variant, VariantSpec, travel_evidence
+from autograder.engine.variants import (Variant, VariantSpec, cell_evidence, submitted_values,
+                                        travel_evidence)
 from autograder.engine.submission import (
     Submission,
     file_sha256,
@@ -339,6 +340,9 @@ class Grader:
             submission = open_submission(Path(path), self.assignment.notebooks,
                                          scratch=Path(scratch))
             files = dict(submission.notebooks)
+            # the student's parameters cell, read (never run) while the files are here
+            cell = (submitted_values(files.get(self.assignment.notebooks[0].name), spec.cell)
+                    if spec is not None else None)
             parts = [(nb.name, self._grade_part(
                 nb.name, files.get(nb.name), submission, seed, out_dir, digest,
                 section=nb.name if several else None)) for nb in self.assignment.notebooks]
@@ -351,7 +355,8 @@ class Grader:
         result = replace(result, id=sub_id, source=str(path), key=key, sha256=raw_sha,
                          execution_time=time.perf_counter() - start, engine=ENGINE_VERSION)
         if spec is not None:
-            result = with_variant(result, self.assignment.name, spec, self._variant)
+            result = with_variant(result, self.assignment.name, spec, self._variant,
+                                  submitted=cell)
         if out_dir is not None:
             write_submission(out_dir, result, title=self.assignment.title,
                              deadline=self.assignment.deadline)
@@ -543,10 +548,12 @@ class Grader:
 
 
 def with_variant(result: SubmissionResult, assignment: str, spec: VariantSpec,
-                 variant: Variant | None) -> SubmissionResult:
+                 variant: Variant | None, *,
+                 submitted: dict[str, Any] | None = None) -> SubmissionResult:
     """``result`` with the student's variant recorded, and a note for a person when the id
-    has no variant or the outputs match a classmate's variant (computed here, on the
-    trusted side, from the outputs the checks recorded)."""
+    has no variant, the outputs match a classmate's variant (computed here, on the
+    trusted side, from the outputs the checks recorded) or the notebook's parameters cell
+    (``submitted``, its values) is not the student's own."""
     if variant is None:
         return replace(result, variant={"student": result.id, "seed": None, "params": None},
                        notes=result.notes + (
@@ -557,7 +564,10 @@ def with_variant(result: SubmissionResult, assignment: str, spec: VariantSpec,
     roster = spec.students() or ()
     others = [spec.draw(assignment, s) for s in roster if s != variant.student]
     evidence = travel_evidence(variant, observed, others, spec.answers) if observed else []
-    notes = tuple(f"{SUBMISSION_NOTE}an answer that travelled: {e}." for e in evidence)
+    cell = cell_evidence(variant, submitted, others, secret_env=spec.secret_env,
+                         active=spec.active())
+    notes = tuple(f"{SUBMISSION_NOTE}an answer that travelled: {e}." for e in evidence) \
+        + tuple(f"{SUBMISSION_NOTE}{e}." for e in cell)
     return replace(result, variant=variant.to_dict(), notes=result.notes + notes)
 
 

@@ -44,9 +44,11 @@ from __future__ import annotations
 
 import ast
 import csv
+import functools
 import hashlib
 import hmac
 import importlib.util
+import json
 import os
 import pprint
 from dataclasses import dataclass, field
@@ -60,7 +62,8 @@ import numpy as np
 from autograder.errors import AssignmentError
 
 __all__ = ["Variant", "VariantSpec", "parse_variants", "read_roster", "parameters_source",
-           "travel_evidence", "instructor_values", "VARIANT_TAG"]
+           "travel_evidence", "instructor_values", "submitted_values", "cell_evidence",
+           "VARIANT_TAG"]
 
 VARIANT_TAG = "variant"
 _KEYS = ("params", "roster", "cell", "secret_env", "fixed")
@@ -121,16 +124,10 @@ class VariantSpec:
         if not self.active():
             return Variant(student, None, self.instructor)
         seed = self.seed(assignment, student)
-        rng = np.random.default_rng(seed)
-        drawn = {name: _draw_one(rng, spec) for name, spec in self.params}
-        module = _hook(self.hook)
-        if module is not None and hasattr(module, "draw"):
-            extra = module.draw(rng)
-            if not isinstance(extra, dict):
-                raise AssignmentError(f"{self.hook}: draw(rng) must return a dict of "
-                                      f"parameters; got {type(extra).__name__}.")
-            drawn.update(extra)
-        return Variant(student, seed, tuple((k, _plain(v)) for k, v in drawn.items()))
+        hook = self.hook if self.hook is not None and self.hook.is_file() else None
+        drawn = _drawn(json.dumps(self.params, default=str), str(hook) if hook else "",
+                       hook.stat().st_mtime_ns if hook else 0, seed)
+        return Variant(student, seed, tuple(json.loads(drawn).items()))
 
     def students(self) -> tuple[str, ...] | None:
         """The roster's ids (``None``: no roster, every id has a variant)."""
@@ -153,6 +150,31 @@ class VariantSpec:
             return {}
         found = module.answers(variant.as_dict())
         return dict(found) if isinstance(found, Mapping) else {}
+
+
+@functools.lru_cache(maxsize=4096)
+def _drawn(params: str, hook: str, mtime: int, seed: int) -> str:
+    """The parameters drawn from ``seed`` (the table's, then the hook's), as JSON.
+
+    Cached: every submission's evidence draws the whole roster's variants again, and a
+    hook may take milliseconds per draw (the hull's redraws until a board is fair). The
+    hook's modification time is in the key, so an edited hook draws afresh; JSON keeps
+    the cached values from being changed by a caller.
+    """
+    rng = np.random.default_rng(seed)
+    drawn = {name: _draw_one(rng, spec) for name, spec in json.loads(params)}
+    module = _hook(Path(hook)) if hook else None
+    if module is not None and hasattr(module, "draw"):
+        extra = module.draw(rng)
+        if not isinstance(extra, dict):
+            raise AssignmentError(f"{hook}: draw(rng) must return a dict of "
+                                  f"parameters; got {type(extra).__name__}.")
+        drawn.update(extra)
+    try:
+        return json.dumps({k: _plain(v) for k, v in drawn.items()})
+    except TypeError as exc:
+        raise AssignmentError(f"{hook or 'the [variants] table'}: the parameters must be plain "
+                              f"values (numbers, strings, lists of them): {exc}.") from None
 
 
 def _draw_one(rng: np.random.Generator, spec: dict[str, Any]) -> Any:
@@ -265,32 +287,84 @@ def instructor_values(notebook: Path, cell: str) -> tuple[tuple[str, Any], ...]:
     """The parameters cell (tagged ``cell``) of the instructor notebook: ``name = literal``
     lines, read with :func:`ast.literal_eval` (never run). Empty without such a cell."""
     try:
-        book = nbformat.read(str(notebook), as_version=4)
+        source = _cell_source(notebook, cell)
     except Exception:  # nbformat raises many types; load_assignment reports a bad notebook
         return ()
-    found = [c for c in book.cells if c.cell_type == "code"
-             and cell in c.get("metadata", {}).get("tags", [])]
-    if len(found) != 1:
+    if source is None:
         return ()
-    values: dict[str, Any] = {}
     try:
-        body = ast.parse(found[0].source).body
+        return tuple(_literal_lines(source).items())
     except SyntaxError as exc:
         raise AssignmentError(f"{notebook}: the parameters cell (tagged {cell!r}) is not "
                               f"valid Python (line {exc.lineno}: {exc.msg}).") from None
-    for node in body:
+    except ValueError as exc:
+        raise AssignmentError(
+            f"{notebook}: the parameters cell (tagged {cell!r}) may only set names to "
+            f"plain values (numbers, strings, lists), one `name = value` per line; line "
+            f"{exc.args[0]} is not one.") from None
+
+
+#: a submitted parameters cell longer than this is not read (a point set of 31 pins is 1 KB)
+MAX_SUBMITTED_CELL = 200_000
+
+
+def submitted_values(notebook: Path | None, cell: str) -> dict[str, Any] | None:
+    """The values of a submitted notebook's parameters cell, read with :func:`ast.literal_eval`
+    on the grader's side (never run); ``None`` when it has none or they are not plain values."""
+    try:
+        source = _cell_source(notebook, cell) if notebook is not None else None
+        if source is None or len(source) > MAX_SUBMITTED_CELL:
+            return None
+        return _literal_lines(source)
+    except Exception:  # anything a student wrote (deep nesting included): no evidence
+        return None
+
+
+def _cell_source(notebook: Path, cell: str) -> str | None:
+    book = nbformat.read(str(notebook), as_version=4)
+    found = [c for c in book.cells if c.cell_type == "code"
+             and cell in c.get("metadata", {}).get("tags", [])]
+    return found[0].source if len(found) == 1 else None
+
+
+def _literal_lines(source: str) -> dict[str, Any]:
+    """``name = literal`` lines as a dict; ValueError(line number) for any other line."""
+    values: dict[str, Any] = {}
+    for node in ast.parse(source).body:
         target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 \
             else None
+        if not isinstance(target, ast.Name):
+            raise ValueError(node.lineno)
         try:
-            if not isinstance(target, ast.Name):
-                raise ValueError
             values[target.id] = ast.literal_eval(node.value)  # type: ignore[union-attr]
         except ValueError:
-            raise AssignmentError(
-                f"{notebook}: the parameters cell (tagged {cell!r}) may only set names to "
-                f"plain values (numbers, strings, lists), one `name = value` per line; line "
-                f"{node.lineno} is not one.") from None
-    return tuple(values.items())
+            raise ValueError(node.lineno) from None
+    return values
+
+
+def cell_evidence(own: Variant, submitted: Mapping[str, Any] | None, others: Sequence[Variant],
+                  *, secret_env: str, active: bool) -> list[str]:
+    """Why the submitted notebook's parameters cell is not the student's own, one line each:
+    a classmate's variant (a copied notebook), or values nobody was given."""
+    if submitted is None or not own.params:
+        return []
+
+    def holds(variant: Variant) -> bool:
+        return all(k in submitted and _same(submitted[k], v) for k, v in variant.params)
+
+    if holds(own):
+        return []
+    for other in others:
+        if other.student != own.student and other.params != own.params and holds(other):
+            return [f"the notebook's parameters cell holds {other.student}'s variant, not this "
+                    f"student's (a notebook copied from {other.student}, or handed on)"]
+    if not active:
+        return [f"the notebook's parameters cell holds values that are not the instructor's, "
+                f"and {secret_env} is not set here, so it was graded with the instructor's "
+                "values; if it was released with --variants, set the course secret and grade "
+                "again"]
+    return ["the notebook's parameters cell holds values other than this student's variant "
+            "(changed by hand, or released under another course secret)"]
 
 
 def _param(toml_path: Path, name: str, spec: Any) -> dict[str, Any]:

@@ -132,7 +132,7 @@ def with_model_solution(released: Path, extra: str = "") -> nbformat.NotebookNod
 
 
 @pytest.mark.slow
-def test_release_and_grade_two_honest_students_and_a_copier(
+def test_release_and_grade_two_honest_students_and_two_copiers(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     env = {**os.environ, "NUMGRADE_VARIANT_SECRET": SECRET}
     (tmp_path / "roster.csv").write_text("id\nalice\nbob\ncarol\n")
@@ -153,12 +153,14 @@ def test_release_and_grade_two_honest_students_and_a_copier(
               f"    if len(points) == 31:\n        return {alices}\n    return _march(points)\n")
     nbformat.write(with_model_solution(tmp_path / "release" / "carol" / "hull.ipynb", copied),
                    str(submitted / "carol.ipynb"))
+    # dave hands in alice's whole notebook: every answer right, but her parameters cell
+    (submitted / "dave.ipynb").write_bytes((submitted / "alice.ipynb").read_bytes())
 
     done = autograder("grade", "hull", "submitted", "--out", "results", "--no-progress",
                       env=env, cwd=tmp_path)
     assert done.returncode == 0, done.stdout + done.stderr
     results = {s: json.loads((tmp_path / "results" / s / "results.json").read_text())
-               for s in ("alice", "bob", "carol")}
+               for s in ("alice", "bob", "carol", "dave")}
     spec = load_assignment(HULL).variants
     for student in ("alice", "bob"):
         result = results[student]
@@ -170,7 +172,9 @@ def test_release_and_grade_two_honest_students_and_a_copier(
     summary = json.loads((tmp_path / "results" / "summary.json").read_text())
     flagged = {a["id"]: " ".join(c["detail"] for c in a["concerns"])
                for a in summary["attention"]}
-    assert set(flagged) == {"carol"}
+    assert set(flagged) == {"carol", "dave"}
+    assert "parameters cell holds alice's variant" in flagged["dave"]
+    assert results["dave"]["score"] == 38  # right code: the flag is for a person to judge
     assert "travelled" in flagged["carol"] and "alice's variant" in flagged["carol"]
     assert str(alices) in flagged["carol"]
     page = html.unescape((tmp_path / "results" / "summary.html").read_text())

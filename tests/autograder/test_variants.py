@@ -218,3 +218,24 @@ def test_a_parameters_cell_of_code_names_the_line(tmp_path: Path, cell: str,
     nbformat.write(nb, str(folder / "scaled.ipynb"))
     with pytest.raises(AssignmentError, match=message):
         load_assignment(folder)
+
+
+def test_a_notebook_released_with_variants_but_graded_without_the_secret_is_flagged(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("NUMGRADE_VARIANT_SECRET", "course secret for the tests")
+    assignment = load_assignment(write_scaled(tmp_path / "src"))
+    ada, bob = release_variants(assignment, assignment.root / "roster.csv", tmp_path / "out")
+    answered(ada, SOLUTION)
+    (tmp_path / "copy").mkdir()
+    copy = tmp_path / "copy" / "scaled.ipynb"  # bob hands in ada's notebook
+    copy.write_bytes(ada.read_bytes())
+    with Grader(assignment) as grader:
+        copied = grader.grade(copy, id="bob")
+    evidence = " ".join(c.detail for c in needs_attention([copied])[0].concerns)
+    assert "parameters cell holds ada's variant" in evidence
+    monkeypatch.delenv("NUMGRADE_VARIANT_SECRET")
+    with Grader(load_assignment(assignment.root)) as grader:
+        result = grader.grade(ada, id="ada")  # ada's own a, graded with the instructor's a = 3
+    flagged = needs_attention([result])
+    assert flagged and "NUMGRADE_VARIANT_SECRET is not set here" in " ".join(
+        c.detail for c in flagged[0].concerns)
