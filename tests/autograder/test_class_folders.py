@@ -129,7 +129,7 @@ def test_ids_never_collapse_and_a_rerun_never_overwrites_another_file(tmp_path: 
     assert sorted(r.id for r in report.results) == ["alice", "alice~21"]
     full = read_result(out / "alice")
     assert full is not None and full.score == full.max_score > 0
-    # a later run with "alice .ipynb": its own id, alice's 36 stays
+    # a later run with "alice .ipynb": its own id, alice's full marks stay
     later = tmp_path / "later"
     _put(NO_CODE, later / "alice .ipynb")
     report = api.grade("hull", [later], out=out, jobs=1, progress=False, options=options)

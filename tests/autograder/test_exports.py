@@ -115,7 +115,7 @@ def test_ci_run_end_to_end(tmp_path: Path) -> None:
              "PYTEST_PLUGINS": "a_plugin_that_does_not_exist"})
     assert proc.returncode == 0, proc.stderr
     points = [line for line in proc.stdout.splitlines() if line.startswith("Points ")]
-    assert sorted(points) == ["Points 10/36", "Points 26/36"]
+    assert sorted(points) == ["Points 10/38", "Points 27/38"]
     root = ET.parse(junit).getroot()
     for suite in root.findall("testsuite"):
         data = json.loads((out / str(suite.get("name")) / "results.json").read_text())
@@ -124,7 +124,7 @@ def test_ci_run_end_to_end(tmp_path: Path) -> None:
         assert (out / str(suite.get("name")) / "feedback.html").exists()
     assert len(root.findall("testsuite")) == 2
     assert (out / "summary.html").exists() and (out / "summary.json").exists()
-    assert "| wrong-clockwise | 26/36 |" in summary.read_text()
+    assert "| wrong-clockwise | 27/38 |" in summary.read_text()
 
 
 def test_pick_notebook(tmp_path: Path) -> None:
@@ -190,10 +190,15 @@ def test_run_autograder_as_gradescope_does(gradescope_zip: Path, tmp_path: Path)
                           timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-3000:]
     data = json.loads((results / "results.json").read_text())
-    assert (data["score"], data["max_score"]) == (26.0, 36.0)
+    assert (data["score"], data["max_score"]) == (27.0, 38.0)
     assert data["extra_data"]["outcome"] == "graded" and data["extra_data"]["id"] == "wrong-clockwise"
     hidden = [t for t in data["tests"] if t["extra_data"]["hidden"]]
-    assert hidden and all(t["visibility"] == "after_published" for t in hidden)
+    plain = [t for t in hidden if "level" not in t["extra_data"]]
+    assert plain and all(t["visibility"] == "after_published" for t in plain)
+    # the student's own board (visibility "input"): shown, with the input and not the hull
+    board = next(t for t in hidden if t["name"] == "convex_hull_your_pins")
+    assert board["visibility"] == "visible" and "your own board" in board["output"]
+    assert "expected" not in board["output"].lower()
     for test in data["tests"]:
         assert {"name", "score", "max_score", "status", "visibility"} <= set(test)
 

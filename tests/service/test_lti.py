@@ -130,14 +130,14 @@ def test_deep_link_launch_upload_and_score(lti: tuple[support.Server, Platform],
     finally:
         engine.dispose()
     sent = scores[-1]
-    assert 0 < sent["scoreGiven"] < sent["scoreMaximum"] == top == 36
+    assert 0 < sent["scoreGiven"] < sent["scoreMaximum"] == top == 38
     assert sent["scoreGiven"] == pytest.approx(score)
     assert sent["userId"] == "student-1" and sent["gradingProgress"] == "FullyGraded"
     assert sent["activityProgress"] == "Completed" and sent["timestamp"]
     # what the instructor reads in the platform's gradebook (docs/lti.md, "Trying it locally")
     browser.open(f"{platform.url}/gradebook")
     row = next(line for line in browser.text("table").splitlines() if "student-1" in line)
-    assert f"{sent['scoreGiven']} / 36" in row
+    assert f"{sent['scoreGiven']} / 38" in row
 
 
 @pytest.mark.browser
@@ -233,7 +233,7 @@ def test_a_score_queued_while_the_lms_is_down_arrives_after_a_restart(
         platform.start()
         server.start()
         scores = wait_until(lambda: platform.course.scores.get(lineitem), "the score after restart")
-        assert scores[-1]["scoreGiven"] == scores[-1]["scoreMaximum"] == 36
+        assert scores[-1]["scoreGiven"] == scores[-1]["scoreMaximum"] == 38
         with engine.connect() as db:
             states = db.execute(text("SELECT state FROM lti_scores")).scalars().all()
         assert states and set(states) == {"sent"}
