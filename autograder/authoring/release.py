@@ -266,6 +266,9 @@ def _write_toml(assignment: Assignment, out_dir: Path, notebook: Path,
         "[rules]",
         f"forbid = [{', '.join(_toml_str(f) for f in assignment.rules.forbid)}]",
         f"reason = {_toml_str(assignment.rules.reason)}",
+        # what an allowed library uses inside (matplotlib's own matplotlib.path): without
+        # it a student's `autograder check` would call their plotting cell forbidden
+        f"internal_use = [{', '.join(_toml_str(f) for f in assignment.rules.internal_use)}]",
         "",
         "[limits]",
         f"notebook_timeout = {assignment.notebook_timeout!r}",
