@@ -30,7 +30,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 import hull_feedback  # checks/public/hull_feedback.py: on sys.path while checks run
-import hull_feedback as feedback
+import hull_feedback as feedback  # the short name, where no check takes the `feedback` fixture
 from autograder.checks import (Credit, Dataset, Feedback, Student, VariantView, over_datasets,
                                same_cycle)
 from reference import convex_hull as reference_hull, orient2d
