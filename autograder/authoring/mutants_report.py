@@ -7,7 +7,7 @@ from pathlib import Path
 
 import jinja2
 
-from autograder.authoring.mutants_run import MutationRun
+from autograder.authoring.mutants_run import TIME_FACTOR, TIME_FLOOR, MutationRun
 
 __all__ = ["format_mutants", "write_mutants"]
 
@@ -15,12 +15,13 @@ __all__ = ["format_mutants", "write_mutants"]
 def format_mutants(run: MutationRun) -> str:
     """The table ``validate --mutants`` prints, then survivors, idle checks and the verdict."""
     lines = [f"Mutation analysis of {run.assignment} ({len(run.outcomes)} of {run.generated} "
-             "mutants graded):", "",
+             f"mutants graded, each with {run.cpu_budget:g} s of CPU):", "",
              f"  {'mutant':<40} {'score':>11}  killed by"]
     for o in run.outcomes:
         score = f"{o.score:g}/{o.max_score:g}"
         what = ("EQUIVALENT (same outputs as the model solution)" if o.equivalent else
-                f"{len(o.killed_by)} check(s): {', '.join(o.killed_by[:3])}"
+                ("TOO SLOW, " if o.too_slow else "")
+                + f"{len(o.killed_by)} check(s): {', '.join(o.killed_by[:3])}"
                 + (" ..." if len(o.killed_by) > 3 else "") if o.killed_by else
                 "SURVIVES" + (f" (accepted: {o.accepted})" if o.accepted else ""))
         lines.append(f"  {o.mutant.id:<40} {score:>11}  {what}")
@@ -30,6 +31,11 @@ def format_mutants(run: MutationRun) -> str:
                  f"mutants: kill rate {run.kill_rate:.1%}"
                  + (f" (minimum {run.min_kill_rate:.0%})" if run.min_kill_rate is not None else "")
                  + f"; {len(run.outcomes) - len(counted)} equivalent, not counted.")
+    slow = sum(o.too_slow for o in run.outcomes)
+    if slow:
+        lines.append(f"  {slow} mutant(s) TOO SLOW: they spent the whole budget of {run.cpu_budget:g} s "
+                     f"of CPU ({TIME_FACTOR:g} times the model solution's, at least {TIME_FLOOR:g} s) "
+                     "and count as killed.")
     for o in run.survivors:
         lines.append(f"  survivor {o.mutant.id}:")
         lines += [f"      {line}" for line in o.mutant.diff.splitlines()[2:]]
