@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 
 import jinja2
@@ -23,7 +24,7 @@ def format_mutants(run: MutationRun) -> str:
                 ("TOO SLOW, " if o.too_slow else "")
                 + f"{len(o.killed_by)} check(s): {', '.join(o.killed_by[:3])}"
                 + (" ..." if len(o.killed_by) > 3 else "") if o.killed_by else
-                "SURVIVES" + (f" (accepted: {o.accepted})" if o.accepted else ""))
+                "SURVIVES" + (" (accepted in mutants.toml)" if o.accepted else ""))
         lines.append(f"  {o.mutant.id:<40} {score:>11}  {what}")
     lines.append("")
     counted = run.counted
@@ -39,6 +40,9 @@ def format_mutants(run: MutationRun) -> str:
     for o in run.survivors:
         lines.append(f"  survivor {o.mutant.id}:")
         lines += [f"      {line}" for line in o.mutant.diff.splitlines()[2:]]
+        if o.accepted:
+            lines += textwrap.wrap("accepted: " + " ".join(o.accepted.split()), width=96,
+                                   initial_indent="    ", subsequent_indent="      ")
     if run.idle_checks:
         lines.append("Checks that kill no mutant: " + ", ".join(run.idle_checks))
     lines += [f"Problem: {p}" for p in run.problems]
