@@ -34,9 +34,9 @@ def format_mutants(run: MutationRun) -> str:
                  + f"; {len(run.outcomes) - len(counted)} equivalent, not counted.")
     slow = sum(o.too_slow for o in run.outcomes)
     if slow:
-        lines.append(f"  {slow} mutant(s) TOO SLOW: they spent the whole budget of {run.cpu_budget:g} s "
-                     f"of CPU ({TIME_FACTOR:g} times the model solution's, at least {TIME_FLOOR:g} s) "
-                     "and count as killed.")
+        lines.append(f"  {slow} mutant(s) TOO SLOW: they spent the whole budget of "
+                     f"{run.cpu_budget:g} s of CPU ({TIME_FACTOR:g} times the model solution's, "
+                     f"at least {TIME_FLOOR:g} s) and count as killed.")
     for o in run.survivors:
         lines.append(f"  survivor {o.mutant.id}:")
         lines += [f"      {line}" for line in o.mutant.diff.splitlines()[2:]]

@@ -14,11 +14,11 @@ call runs the reference and the mutant on the same arguments (functions passed
 in are memoised, so the reference's calls to them are not counted twice) and
 raises when the outputs are not identical (same types, shapes, dtypes and
 values, NaN equal to NaN; a matplotlib figure by the pixels it draws) or when
-only one of them raises. A probe that still
-gets full points gave the checks the reference's very outputs on every input
-they tried: the mutant is *equivalent* on the checks' data, reported apart and
-not counted in the kill rate. A probe that loses points is an ordinary survivor:
-its outputs differ and no check noticed.
+only one of them raises. A probe that still gets full points gave the checks
+the reference's very outputs on every input they tried: the mutant is
+*equivalent* on the checks' data, reported apart and not counted in the kill
+rate. A probe that loses points is an ordinary survivor: its outputs differ and
+no check noticed.
 
 Time: the reference is graded first, alone; each mutant then gets a CPU budget of
 :data:`TIME_FACTOR` times the reference's CPU seconds (at least :data:`TIME_FLOOR`,

@@ -195,8 +195,8 @@ def test_validate_hull_mutants_prints_its_kill_table_and_passes_the_bar(tmp_path
     data = json.loads((out / "mutants.json").read_text())
     assert data["ok"] and data["min_kill_rate"] == 0.9 and data["kill_rate"] >= 0.9
     assert len(data["mutants"]) == 40
-    rows = [line.split()[0] for line in proc.stdout.splitlines() if line.startswith("  orientation-")
-            or line.startswith("  convex_hull-")]
+    rows = [line.split()[0] for line in proc.stdout.splitlines()
+            if line.startswith(("  orientation-", "  convex_hull-"))]
     assert sorted(rows) == sorted(m["id"] for m in data["mutants"])  # one table row per mutant
     for m in data["mutants"]:
         assert m["equivalent"] or m["killed_by"] or m["accepted"], m["id"]
