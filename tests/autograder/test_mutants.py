@@ -198,5 +198,6 @@ def test_validate_hull_mutants_prints_its_kill_table_and_passes_the_bar(tmp_path
     rows = [line.split()[0] for line in proc.stdout.splitlines()
             if line.startswith(("  orientation-", "  convex_hull-"))]
     assert sorted(rows) == sorted(m["id"] for m in data["mutants"])  # one table row per mutant
-    for m in data["mutants"]:
-        assert m["equivalent"] or m["killed_by"] or m["accepted"], m["id"]
+    for m in data["mutants"]:  # a survivor needs a check that kills it or a reason
+        assert m["equivalent"] or m["killed_by"] or m["accepted"], (
+            f"{m['id']} survives and assignments/hull/mutants.toml gives no reason:\n{m['diff']}")
