@@ -3,8 +3,10 @@
 Runs :func:`autograder.authoring.mutants_run.run_mutants` (what ``autograder validate
 ASSIGNMENT --mutants`` runs after the examples) on each assignment with ``--jobs 2``
 and prints one row per assignment: mutants generated and graded, equivalent ones,
-kill rate over the others, survivors, and wall seconds per graded mutant (the
-equivalence probes of the survivors included).
+too slow ones (spent their CPU budget; counted as killed), kill rate over the
+non-equivalent ones, survivors (and how many of them ``mutants.toml`` accepts), and
+wall seconds per graded mutant (the reference's own grading and the equivalence
+probes of the survivors included).
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ def main() -> None:
                         help="mutants per assignment (default: each assignment's [mutants] max)")
     add_json_option(parser, "validate_mutants")
     args = parser.parse_args()
-    print(f"{'assignment':<15} {'generated':>9} {'graded':>6} {'equiv':>5} {'kill rate':>9} "
-          f"{'survivors':>9} {'s/mutant':>8}")
+    print(f"{'assignment':<15} {'generated':>9} {'graded':>6} {'equiv':>5} {'too slow':>8} "
+          f"{'kill rate':>9} {'survivors':>9} {'accepted':>8} {'s/mutant':>8}")
     figures = []
     for name in args.assignments:
         assignment = load_assignment(ROOT / "assignments" / name)
@@ -42,8 +44,10 @@ def main() -> None:
         graded = len(run.outcomes)
         per = run.seconds / graded if graded else 0.0
         equivalent = graded - len(run.counted)
-        print(f"{name:<15} {run.generated:>9} {graded:>6} {equivalent:>5} {run.kill_rate:>9.1%} "
-              f"{len(run.survivors):>9} {per:>8.2f}")
+        slow = sum(o.too_slow for o in run.outcomes)
+        accepted = sum(o.accepted is not None for o in run.survivors)
+        print(f"{name:<15} {run.generated:>9} {graded:>6} {equivalent:>5} {slow:>8} "
+              f"{run.kill_rate:>9.1%} {len(run.survivors):>9} {accepted:>8} {per:>8.2f}")
         figures += [Figure(f"{name}: mutants graded", graded, "mutants"),
                     Figure(f"{name}: kill rate", run.kill_rate, "fraction"),
                     Figure(f"{name}: seconds per mutant (--jobs {args.jobs})", per, "s")]

@@ -13,6 +13,13 @@ operator for the faults numerical-methods students make, so these are written
 here (:class:`_NumericalMutations`): dropped and duplicated terms, off-by-one in
 ``range`` ends, indices and slice bounds, a float32 cast of a returned value, a
 reversed loop and a returned sequence in the other (often still valid) order.
+
+Two choices keep the mutants to faults a check should see: the functions mutated
+are the ones the checks call and the solution functions these call in turn
+(:func:`graded_functions`: a fault in a helper is a fault in the graded result);
+and the values of matplotlib's style keywords (``figsize``, ``lw``, ``alpha``,
+... in :data:`STYLE_KEYWORDS`) are left alone: a thicker line is a different
+figure, not a mistake.
 """
 
 from __future__ import annotations
@@ -26,10 +33,17 @@ import nbformat
 from libcst.metadata import MetadataWrapper, PositionProvider
 from mutmut.mutation import mutators as mutmut_ops
 
-__all__ = ["Mutant", "generate_mutants", "solution_functions", "reference_copies", "REF_PREFIX"]
+__all__ = ["Mutant", "generate_mutants", "graded_functions", "solution_functions",
+           "reference_copies", "REF_PREFIX", "STYLE_KEYWORDS"]
 
 #: the prefix of the reference's functions copied into a probe notebook
 REF_PREFIX = "_ngref_"
+
+#: keyword arguments of matplotlib calls that only set how a figure looks: not mutated
+STYLE_KEYWORDS = frozenset({
+    "figsize", "dpi", "lw", "linewidth", "linewidths", "ls", "linestyle", "ms", "markersize",
+    "mew", "markeredgewidth", "alpha", "fontsize", "zorder", "pad", "shrink", "aspect",
+})
 
 #: mutmut's operators that make sense for numerical code (its string, argument and
 #: ``x = None`` operators only give mutants every check kills by a crash)
@@ -112,14 +126,17 @@ def _docstring(function: cst.FunctionDef) -> cst.CSTNode | None:
 
 
 class _Collect(cst.CSTVisitor):
-    """Every node of ``function`` (its docstring and decorators left out), in source order."""
+    """Every node of ``function`` (its docstring, decorators and the values of style
+    keywords left out), in source order."""
 
     def __init__(self, skip: cst.CSTNode | None) -> None:
         self.nodes: list[cst.CSTNode] = []
         self._skip = skip
 
     def on_visit(self, node: cst.CSTNode) -> bool:
-        if node is self._skip or isinstance(node, cst.Decorator):
+        if node is self._skip or isinstance(node, cst.Decorator) or (
+                isinstance(node, cst.Arg) and node.keyword is not None
+                and node.keyword.value in STYLE_KEYWORDS):
             return False
         self.nodes.append(node)
         return True
@@ -169,6 +186,30 @@ def solution_functions(notebook: nbformat.NotebookNode) -> list[tuple[int, cst.M
                 if inside & set(range(where.start.line, where.end.line + 1)):
                     found.append((index, wrapper.module, statement))
     return found
+
+
+def graded_functions(notebook: nbformat.NotebookNode, called: set[str]) -> set[str]:
+    """``called`` (the solution functions the checks call) and every solution function
+    these call, directly or through others."""
+    bodies = {f.name.value: f for _, _, f in solution_functions(notebook)}
+    graded, todo = set(), [n for n in called if n in bodies]
+    while todo:
+        name = todo.pop()
+        if name in graded:
+            continue
+        graded.add(name)
+        used = _Names()
+        bodies[name].body.visit(used)
+        todo += [n for n in used.names if n in bodies and n not in graded]
+    return graded
+
+
+class _Names(cst.CSTVisitor):
+    def __init__(self) -> None:
+        self.names: set[str] = set()
+
+    def visit_Name(self, node: cst.Name) -> None:
+        self.names.add(node.value)
 
 
 def _numpy_alias(notebook: nbformat.NotebookNode) -> str | None:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 
 import jinja2
 
-from autograder.authoring.mutants_run import MutationRun
+from autograder.authoring.mutants_run import TIME_FACTOR, TIME_FLOOR, MutationRun
 
 __all__ = ["format_mutants", "write_mutants"]
 
@@ -15,14 +16,15 @@ __all__ = ["format_mutants", "write_mutants"]
 def format_mutants(run: MutationRun) -> str:
     """The table ``validate --mutants`` prints, then survivors, idle checks and the verdict."""
     lines = [f"Mutation analysis of {run.assignment} ({len(run.outcomes)} of {run.generated} "
-             "mutants graded):", "",
+             f"mutants graded, each with {run.cpu_budget:g} s of CPU):", "",
              f"  {'mutant':<40} {'score':>11}  killed by"]
     for o in run.outcomes:
         score = f"{o.score:g}/{o.max_score:g}"
         what = ("EQUIVALENT (same outputs as the model solution)" if o.equivalent else
-                f"{len(o.killed_by)} check(s): {', '.join(o.killed_by[:3])}"
+                ("TOO SLOW, " if o.too_slow else "")
+                + f"{len(o.killed_by)} check(s): {', '.join(o.killed_by[:3])}"
                 + (" ..." if len(o.killed_by) > 3 else "") if o.killed_by else
-                "SURVIVES" + (f" (accepted: {o.accepted})" if o.accepted else ""))
+                "SURVIVES" + (" (accepted in mutants.toml)" if o.accepted else ""))
         lines.append(f"  {o.mutant.id:<40} {score:>11}  {what}")
     lines.append("")
     counted = run.counted
@@ -30,9 +32,17 @@ def format_mutants(run: MutationRun) -> str:
                  f"mutants: kill rate {run.kill_rate:.1%}"
                  + (f" (minimum {run.min_kill_rate:.0%})" if run.min_kill_rate is not None else "")
                  + f"; {len(run.outcomes) - len(counted)} equivalent, not counted.")
+    slow = sum(o.too_slow for o in run.outcomes)
+    if slow:
+        lines.append(f"  {slow} mutant(s) TOO SLOW: they spent the whole budget of "
+                     f"{run.cpu_budget:g} s of CPU ({TIME_FACTOR:g} times the model solution's, "
+                     f"at least {TIME_FLOOR:g} s) and count as killed.")
     for o in run.survivors:
         lines.append(f"  survivor {o.mutant.id}:")
         lines += [f"      {line}" for line in o.mutant.diff.splitlines()[2:]]
+        if o.accepted:
+            lines += textwrap.wrap("accepted: " + " ".join(o.accepted.split()), width=96,
+                                   initial_indent="    ", subsequent_indent="      ")
     if run.idle_checks:
         lines.append("Checks that kill no mutant: " + ", ".join(run.idle_checks))
     lines += [f"Problem: {p}" for p in run.problems]

@@ -17,9 +17,9 @@ from pathlib import Path
 import nbformat
 import pytest
 
-from autograder.authoring.mutants import generate_mutants
+from autograder.authoring.mutants import generate_mutants, graded_functions
 from autograder.authoring.mutants_report import format_mutants, write_mutants
-from autograder.authoring.mutants_run import MutationRun, run_mutants
+from autograder.authoring.mutants_run import PROBE, TIME_FLOOR, MutationRun, run_mutants
 from autograder.engine.assignment import load_assignment
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,17 +28,28 @@ WEAK = ("def test_total_is_positive(student):\n"
         "    assert student.total([1, 2, 3]) > 0, 'the sum of 1, 2, 3 is positive'\n")
 STRONG = ("def test_total_sums(student):\n"
           "    assert student.total([1, 2, 3]) == 6, 'total([1, 2, 3]) must be 6'\n")
+#: ``total`` through a helper, beside a function no check reaches and a plot
+HELPED = ("def add(a, b):\n    return a + b\n\n"
+          "def total(xs):\n    s = 0\n    for x in xs:\n        s = add(s, x)\n    return s\n\n"
+          "def unused(x):\n    return x * 2\n\n"
+          "def draw(xs):\n    fig, ax = plt.subplots(figsize=(4, 3))\n"
+          "    ax.plot(xs, lw=2, alpha=0.5)\n    ax.set_xlim(0, 9)\n    return fig\n")
+#: ``total`` with a while loop: ``i = 1`` for ``i += 1`` never ends
+WHILE = ("def total(xs):\n    s, i = 0, 0\n    while i < len(xs):\n        s += xs[i]\n"
+         "        i += 1\n    return s\n")
 
 
-def write_total(root: Path, checks: dict[str, str], toml_extra: str = "") -> Path:
-    """An assignment whose model solution is ``total``; ``checks`` are public check files."""
+def write_total(root: Path, checks: dict[str, str], toml_extra: str = "",
+                solution: str = TOTAL) -> Path:
+    """An assignment whose model solution is ``total`` (``solution``: its code);
+    ``checks`` are public check files."""
     folder = root / "total"
     for part in ("checks/public", "checks/hidden", "examples"):
         (folder / part).mkdir(parents=True)
     (folder / "assignment.toml").write_text(
         '[assignment]\nname = "total"\ntitle = "Sum it"\nnotebook = "total.ipynb"\n' + toml_extra)
     cell = nbformat.v4.new_code_cell(
-        "### BEGIN SOLUTION\n" + TOTAL + "### END SOLUTION",
+        "### BEGIN SOLUTION\n" + solution + "### END SOLUTION",
         metadata={"nbgrader": {"grade_id": "total", "solution": True, "grade": False,
                                "locked": False, "schema_version": 3}})
     nbformat.write(nbformat.v4.new_notebook(cells=[cell]), folder / "total.ipynb")
@@ -121,3 +132,72 @@ def test_the_strong_check_kills_every_non_equivalent_mutant(tmp_path: Path) -> N
     run = run_mutants(load_assignment(folder), tmp_path / "work", jobs=2)
     assert run.ok and run.kill_rate == 1.0 and run.survivors == ()
     assert [o.mutant.operator for o in run.outcomes if o.equivalent] == ["reversed-loop"]
+
+
+def test_helpers_the_checks_reach_are_mutated_and_style_keywords_are_not(tmp_path: Path) -> None:
+    folder = write_total(tmp_path, {"test_s.py": STRONG}, solution=HELPED)
+    nb = nbformat.read(str(folder / "total.ipynb"), as_version=4)
+    assert graded_functions(nb, {"total"}) == {"total", "add"}
+    assert graded_functions(nb, {"draw"}) == {"draw"}
+    mutants = generate_mutants(nb)
+    assert any(m.function == "add" and "a - b" in m.diff for m in mutants)
+    drawn = [m.diff for m in mutants if m.function == "draw"]
+    assert any("set_xlim(1, 9)" in d for d in drawn)  # an axis limit is content, not style
+    assert not any("figsize=(5" in d or "lw=3" in d or "alpha=1.5" in d for d in drawn)
+
+
+def test_the_probe_compares_figures_by_their_pixels() -> None:
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    probe: dict = {}
+    exec(PROBE.replace("{wraps}", ""), probe)  # the probe cell's own code, run here
+    same = probe["_ng_same"]
+
+    def line(width: float) -> object:
+        fig, ax = plt.subplots(figsize=(3, 2))
+        ax.plot([0, 1, 3], lw=width)
+        return fig
+
+    try:
+        assert same(line(1), line(1)), "two figures that draw the same picture are the same"
+        assert not same(line(1), line(2)), "a thicker line is a different picture"
+        assert same(line(1).axes[0], line(1).axes[0]), "an Axes is compared by its figure"
+        assert not same(line(1), [0, 1, 3])
+    finally:
+        plt.close("all")
+
+
+@pytest.mark.slow
+def test_a_mutant_that_never_ends_is_too_slow_and_counts_as_killed(tmp_path: Path) -> None:
+    folder = write_total(tmp_path, {"test_s.py": STRONG}, solution=WHILE)
+    run = run_mutants(load_assignment(folder), tmp_path / "work", jobs=2)
+    assert run.cpu_budget == TIME_FLOOR  # ten times a tiny reference is less than the floor
+    endless = [o for o in run.outcomes if "-        i += 1\n+        i = 1\n" in o.mutant.diff]
+    assert len(endless) == 1 and endless[0].too_slow and endless[0].killed_by
+    assert not any(o.too_slow for o in run.outcomes if o is not endless[0])
+    assert run.survivors == () and "TOO SLOW" in format_mutants(run)
+
+
+@pytest.mark.slow
+def test_validate_hull_mutants_prints_its_kill_table_and_passes_the_bar(tmp_path: Path) -> None:
+    """The issue's "done when": the real CLI on the shipped hull assignment, its 40 mutants
+    (``[mutants] max``) and its ``min_kill_rate`` (0.9); about a minute on two cores."""
+    out = tmp_path / "report"
+    proc = subprocess.run([sys.executable, "-m", "autograder", "validate",
+                           str(ROOT / "assignments" / "hull"), "--mutants", "--jobs", "2",
+                           "--out", str(out)],
+                          capture_output=True, text=True, timeout=900, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
+    assert "Mutation analysis of hull (40 of " in proc.stdout
+    assert "(minimum 90%)" in proc.stdout and "hull: every example is in its band" in proc.stdout
+    data = json.loads((out / "mutants.json").read_text())
+    assert data["ok"] and data["min_kill_rate"] == 0.9 and data["kill_rate"] >= 0.9
+    assert len(data["mutants"]) == 40
+    rows = [line.split()[0] for line in proc.stdout.splitlines()
+            if line.startswith(("  orientation-", "  convex_hull-"))]
+    assert sorted(rows) == sorted(m["id"] for m in data["mutants"])  # one table row per mutant
+    for m in data["mutants"]:  # a survivor needs a check that kills it or a reason
+        assert m["equivalent"] or m["killed_by"] or m["accepted"], (
+            f"{m['id']} survives and assignments/hull/mutants.toml gives no reason:\n{m['diff']}")
