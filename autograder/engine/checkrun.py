@@ -4,8 +4,8 @@ Starting ``pytest.main`` for every submission was most of the grader's own time 
 a small assignment (configuration, plugins, importing and collecting the checks).
 :class:`CheckSuite` configures pytest and collects the checks once, then runs the
 collected items for each submission through pytest's per-item phases (setup, call,
-teardown, with their hooks; the reporting around them is left out, see :func:`_run_item`). Nothing
-of one student reaches the next: every fixture of every scope is torn down at the
+teardown, with their hooks; the reporting around them is left out: :func:`_run_item`).
+Nothing of one student reaches the next: every fixture of every scope is torn down at the
 end of each run, the check modules' globals and the items' parameters are put back
 as they were right after collection before each run (see :class:`_Pristine` for
 what cannot be), and the grading plugin is pointed at the new submission.
@@ -48,6 +48,9 @@ def pytest_args(files: Sequence[Path], rootdir: Path) -> list[str]:
     return [str(f) for f in files] + [
         # --confcutdir: a conftest.py above the assignment is never imported into the grader.
         "-c", os.devnull, "--rootdir", str(rootdir), "--confcutdir", str(rootdir),
+        # --capture=sys: a check's prints stay out of the grader's output, kept in memory
+        # (fd capture read a temporary file after every phase of every item; the
+        # verdict never comes from captured output).
         "-p", "no:cacheprovider", "--capture=sys",
         "-p", "no:terminal", "-p", "no:stepwise", "-p", "no:unraisableexception",
         "-p", "no:threadexception", "-p", "no:pastebin", "-p", "no:junitxml", "-p", "no:doctest",
