@@ -293,7 +293,8 @@ def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
 
 # -- the parse of plain Python skips IPython's token passes, with the same tree --------
 
-@pytest.mark.parametrize("source", [
+#: cells in IPython syntax, and Python that looks like it
+CELLS = [
     "import scipy.spatial as sp\nH = sp.ConvexHull",
     "\n\n  x = 1\n  y = x % 2",            # blank first lines and common indentation
     "In [1]: x = 1\n   ...: y = x",        # a pasted IPython prompt, which also parses as Python
@@ -303,7 +304,10 @@ def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
     "%time x = 1", "!ls -l", "x = %pwd", "y = !echo hi", "len?", "/print 1 2", ",f a b",
     "%%timeit -n 2\nx = 1", "def f():\n    %time g()\n    return 1",
     "x = 1\n\tif x:\n  y",                  # not Python at all: the error comes from the full pass
-])
+]
+
+
+@pytest.mark.parametrize("source", CELLS)
 def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> None:
     from IPython.core.inputtransformer2 import TransformerManager
 
@@ -323,16 +327,7 @@ def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> Non
     "x = 1\n  # c\ns = \"\"\"\n  a\"\"\"", "  # c\ns = \"\"\"\n  a\"\"\"",  # indentation in strings
     "print(1)\n>>> x", "x = 1\n... y", "await f()", "async with a:\n    pass",
     "", "\n\n", "x = 1;", "1/0", "a = [1,\n,2]",
-    "import scipy.spatial as sp\nH = sp.ConvexHull",
-    "\n\n  x = 1\n  y = x % 2",            # blank first lines and common indentation
-    "In [1]: x = 1\n   ...: y = x",        # a pasted IPython prompt, which also parses as Python
-    ">>> x = 1\n... y = 2",
-    "x = (1\n% 2)\ny = 1 \\\n    % 2",     # a % at the start of a line inside an expression
-    "a = 'text?'  # comment?\nb = f'{a!r}'",
-    "%time x = 1", "!ls -l", "x = %pwd", "y = !echo hi", "len?", "/print 1 2", ",f a b",
-    "%%timeit -n 2\nx = 1", "def f():\n    %time g()\n    return 1",
-    "x = 1\n\tif x:\n  y",                  # not Python at all: the error comes from the full pass
-])
+    *CELLS])
 def test_the_worker_runs_the_text_the_full_transform_gives(source: str) -> None:
     """The worker's transformer (plain Python skips the token passes) gives the text,
     or raises the error, of IPython's whole ``transform_cell``."""
