@@ -13,6 +13,8 @@ What it prints (medians are not used: each figure is one run over the batch):
   core), this engine ``--jobs 1`` and ``--jobs 2``, ``nbgrader autograde`` (its test
   cells) and ``otter run`` (the same test cells as OK tests), each with
   submissions/s, CPU per submission split into grader and worker, and every ratio;
+  then the floor's and the engine's CPU per submission beyond start-up, from a
+  10-submission batch run beside it, and its ratio to the floor's;
 * a trivial assignment (one cell, one check) built in a temporary folder: the
   engine overhead, total CPU per submission minus the floor's, with start-up spread
   over the batch and, from a 10-submission batch run beside it, beyond start-up
@@ -383,21 +385,33 @@ def trivial_overhead(work: Path, count: int) -> list[Figure]:
                               r.cpu_ms - floor.cpu_ms, "ms CPU"))
     if count <= SHORT:
         return figures
+    return figures + beyond_startup(section, folder, notebooks, short, engine, floor, False,
+                                    work / "tout-short")
+
+
+def beyond_startup(section: str, assignment: Path, notebooks: list[Path], short: Path,
+                   engine: list[Run], floor: Run, public_only: bool, out: Path) -> list[Figure]:
+    """CPU per submission beyond start-up: the long runs minus runs over the :data:`SHORT`
+    submissions in ``short`` (its CPU and seconds taken off the long batch's: what one
+    more submission costs, and the rate at which a long batch goes)."""
+    count = len(notebooks)
     extra = count - SHORT
-    floor_short = run_floor(folder, notebooks[:SHORT], False)
+    floor_short = run_floor(assignment, notebooks[:SHORT], public_only)
     floor_ms = 1000 * (floor.cpu - floor_short.cpu) / extra
     print(f"  beyond start-up (the {count}-submission runs minus {SHORT}-submission runs):")
     print(f"    bare floor: {floor_ms:.1f} ms CPU per submission")
     beyond = f"{section}, beyond start-up"
-    figures.append(Figure(f"{beyond}: bare floor", floor_ms, "ms CPU"))
-    for jobs, long in zip((1, 2), engine):
-        cut = run_engine(folder, short, work / f"tout-short-{jobs}", jobs, False, SHORT)
+    figures = [Figure(f"{beyond}: bare floor", floor_ms, "ms CPU")]
+    for long in engine:
+        jobs = int(long.label.rsplit(" ", 1)[1])
+        cut = run_engine(assignment, short, Path(f"{out}-{jobs}"), jobs, public_only, SHORT)
         cpu_ms = 1000 * (long.cpu - cut.cpu) / extra
         worker_ms = 1000 * (long.worker_cpu - cut.worker_cpu) / extra
         rate = extra / (long.wall - cut.wall)
         print(f"    {long.label}: {cpu_ms:.1f} ms CPU per submission (grader "
               f"{cpu_ms - worker_ms:.1f}, worker {worker_ms:.1f}), {rate:.1f} submissions/s; "
-              f"engine overhead {cpu_ms - floor_ms:.1f} ms", flush=True)
+              f"engine overhead {cpu_ms - floor_ms:.1f} ms, {cpu_ms / floor_ms:.2f}x the floor",
+              flush=True)
         figures += [Figure(f"{beyond}: {long.label}: CPU per submission", cpu_ms, "ms",
                            "bare floor", floor_ms),
                     Figure(f"{beyond}: {long.label}: worker", worker_ms, "ms CPU"),
@@ -441,6 +455,10 @@ def hull_runs(args: argparse.Namespace, work: Path, count: int) -> list[Figure]:
     """The hull batch, every check and the public checks: floor, engine and peers."""
     batch = work / "submitted"
     notebooks = build_batch(batch, count)
+    short = work / "submitted-short"  # the first SHORT submissions, for beyond start-up
+    short.mkdir()
+    for student in sorted(batch.iterdir())[:SHORT]:
+        shutil.copytree(student, short / student.name)
     peers: list[Run] = []
     figures: list[Figure] = []
     for public_only in (False, True):
@@ -463,6 +481,9 @@ def hull_runs(args: argparse.Namespace, work: Path, count: int) -> list[Figure]:
         section = f"hull, {'public checks' if public_only else 'every check'}"
         figures += run_figures(section, runs if public_only else runs + peers)
         figures += print_ratios(runs + peers, section)
+        if count > SHORT:
+            figures += beyond_startup(section, HULL, notebooks, short, runs[1:3], runs[0],
+                                      public_only, work / f"out-short-{public_only}")
     return figures
 
 

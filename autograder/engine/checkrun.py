@@ -3,8 +3,9 @@
 Starting ``pytest.main`` for every submission was most of the grader's own time on
 a small assignment (configuration, plugins, importing and collecting the checks).
 :class:`CheckSuite` configures pytest and collects the checks once, then runs the
-collected items for each submission through pytest's own per-item protocol. Nothing
-of one student reaches the next: every fixture of every scope is torn down at the
+collected items for each submission through pytest's per-item phases (setup, call,
+teardown, with their hooks; the reporting around them is left out: :func:`_run_item`).
+Nothing of one student reaches the next: every fixture of every scope is torn down at the
 end of each run, the check modules' globals and the items' parameters are put back
 as they were right after collection before each run (see :class:`_Pristine` for
 what cannot be), and the grading plugin is pointed at the new submission.
@@ -34,6 +35,8 @@ import pytest
 # Internal to pytest: what pytest.main uses to build a Config from arguments and
 # plugin objects, and the error it raises for a conftest.py that cannot be imported.
 from _pytest.config import ConftestImportFailure, _prepareconfig
+from _pytest.runner import runtestprotocol
+from _pytest.warnings import catch_warnings_for_item
 
 from autograder.engine.plugin import CheckContext, GradingPlugin
 from autograder.errors import AssignmentError, EngineError
@@ -45,7 +48,10 @@ def pytest_args(files: Sequence[Path], rootdir: Path) -> list[str]:
     return [str(f) for f in files] + [
         # --confcutdir: a conftest.py above the assignment is never imported into the grader.
         "-c", os.devnull, "--rootdir", str(rootdir), "--confcutdir", str(rootdir),
-        "-p", "no:cacheprovider",
+        # --capture=sys: a check's prints stay out of the grader's output, kept in memory
+        # (fd capture read a temporary file after every phase of every item; the
+        # verdict never comes from captured output).
+        "-p", "no:cacheprovider", "--capture=sys",
         "-p", "no:terminal", "-p", "no:stepwise", "-p", "no:unraisableexception",
         "-p", "no:threadexception", "-p", "no:pastebin", "-p", "no:junitxml", "-p", "no:doctest",
         "--assert=plain", "--import-mode=importlib",
@@ -88,6 +94,8 @@ class CheckSuite:
                 self._start(files, rootdir)
             assert self._session is not None
             self.items: tuple[pytest.Item, ...] = tuple(self._session.items)
+            assert self._config is not None
+            self._light = _only_pytest_s_own_protocol(self._config)
             # The modules stay out of sys.modules between runs (see _installed_modules).
             self._modules = {n: m for n, m in sys.modules.items()
                              if _is_check_module(n, m, self._tops)}
@@ -170,7 +178,10 @@ class CheckSuite:
                 if isinstance(sections, list):
                     sections.clear()
                 nextitem = items[index + 1] if index + 1 < len(items) else None
-                hook.pytest_runtest_protocol(item=item, nextitem=nextitem)
+                if self._light:
+                    _run_item(item, nextitem)
+                else:  # a conftest.py takes part in the protocol: pytest's own, in full
+                    hook.pytest_runtest_protocol(item=item, nextitem=nextitem)
                 if session.shouldfail or session.shouldstop:
                     raise self._ended_early(f"stopped: {session.shouldfail or session.shouldstop}")
         finally:
@@ -245,6 +256,51 @@ class CheckSuite:
             for name in set(sys.modules) - before:  # imported by a check during the run
                 if _is_check_module(name, sys.modules[name], self._tops):
                     del sys.modules[name]
+
+
+#: the hooks around an item that _run_item leaves out, and the pytest modules whose
+#: implementations of them it stands for (see there)
+_PROTOCOL_HOOKS = ("pytest_runtest_protocol", "pytest_runtest_logstart",
+                   "pytest_runtest_logreport", "pytest_runtest_logfinish")
+_LEFT_OUT = ("_pytest.runner", "_pytest.warnings", "_pytest.assertion", "_pytest.faulthandler",
+             "_pytest.unittest", "_pytest.logging", "_pytest.main", "_pytest.python",
+             "_pytest.junitxml", "_pytest.terminal", "_pytest.resultlog", "_pytest.reports",
+             "_pytest.stepwise", "_pytest.pytester")
+
+
+def _only_pytest_s_own_protocol(config: pytest.Config) -> bool:
+    """Whether only pytest's own plugins implement the hooks :func:`_run_item` leaves out.
+
+    A ``conftest.py`` (or any other plugin) that implements one of them, to take an
+    item over or to watch its reports, gets pytest's full protocol instead.
+    """
+    for name in _PROTOCOL_HOOKS:
+        for impl in getattr(config.hook, name).get_hookimpls():
+            module = getattr(impl.plugin, "__name__", None) or type(impl.plugin).__module__
+            if not isinstance(module, str) or module.split(".")[0] != "_pytest" \
+                    or ".".join(module.split(".")[:2]) not in _LEFT_OUT:
+                return False
+    return True
+
+
+def _run_item(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """One item through pytest's setup, call and teardown, without the reporting around them.
+
+    ``pytest_runtest_protocol`` would add, per item, the log hooks
+    (``pytest_runtest_logstart``, ``logreport`` per phase, ``logfinish``) that only
+    reporters use (none is loaded: the grading plugin records verdicts from
+    ``pytest_runtest_makereport``), and the wrappers of the plugins around the whole
+    protocol: of those only the warnings plugin's changes how a check runs (filters,
+    ``@pytest.mark.filterwarnings``), so it is kept here; the assertion plugin's only
+    serves rewritten asserts (the checks run with ``--assert=plain``) and the
+    faulthandler's only a ``faulthandler_timeout``, which the options never set.
+    Every phase still goes through the hooks that run fixtures, marks and captures.
+    """
+    # Internal to pytest: runtestprotocol is pytest_runtest_protocol's body, and
+    # catch_warnings_for_item the warnings plugin's wrapper of it.
+    with catch_warnings_for_item(config=item.config, ihook=item.ihook, when="runtest",
+                                 item=item):
+        runtestprotocol(item, nextitem=nextitem, log=False)
 
 
 class _Pristine:

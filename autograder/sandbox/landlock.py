@@ -10,13 +10,12 @@ directory (:func:`write_layer`). ``landlockpy`` wraps the Landlock system calls.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from autograder.sandbox.policy import IsolationPolicy
-from autograder.sandbox.readable import readable_paths
+from autograder.sandbox.readable import holes_that_matter, readable_paths
 
 try:  # Landlock is Linux-only; elsewhere the sandbox notes its absence.
     import landlockpy
@@ -100,14 +99,12 @@ def shared_landlock(policy: IsolationPolicy, work_root: Path,
 
 def _landlock_key(policy: IsolationPolicy, work_root: Path,
                   exclude: Sequence[Path]) -> tuple[object, ...]:
+    # Only the exclusions that change the readable roots change the ruleset: a batch's
+    # submissions, each excluding its own folder, share one (cached: the warm parent
+    # resolves a request's exclusions, the child it forks reuses them).
+    extra = [Path(p) for p in policy.allowed_read]
     return (policy.landlock, tuple(policy.allowed_read), str(work_root),
-            _resolved_sorted(tuple(map(str, exclude))))
-
-
-@functools.lru_cache(maxsize=32)
-def _resolved_sorted(paths: tuple[str, ...]) -> tuple[str, ...]:
-    # Cached: the warm parent resolves a request's exclusions, the child it forks reuses them.
-    return tuple(sorted(str(Path(p).resolve()) for p in paths))
+            holes_that_matter(exclude, extra=extra))
 
 
 def allow_own_proc(ruleset: Ruleset) -> None:

@@ -77,7 +77,34 @@ def readable_paths(exclude: Sequence[Path], *, extra: Sequence[Path] = ()) -> li
     list of Path
         Resolved, existing paths; none inside another, none covering an excluded path.
     """
-    return list(_readable_paths_cached(tuple(map(str, exclude)), tuple(map(str, extra))))
+    wider = tuple(map(str, extra))
+    return list(_readable_paths_cached(holes_that_matter(exclude, extra=extra), wider))
+
+
+def holes_that_matter(exclude: Sequence[Path], *, extra: Sequence[Path] = ()) -> tuple[str, ...]:
+    """The resolved paths of ``exclude`` that lie in a readable root, sorted.
+
+    Only these change :func:`readable_paths`: a root is split around an excluded
+    path inside it and dropped when it is one, but an excluded path outside every
+    root (a submission's own folder in a batch, say) leaves every root as it is.
+    So the answer, and a Landlock ruleset built from it, can be reused for every
+    submission whose exclusions differ only there.
+    """
+    return _holes_that_matter(tuple(map(str, exclude)), tuple(map(str, extra)))
+
+
+@functools.lru_cache(maxsize=32)
+def _holes_that_matter(exclude: tuple[str, ...], extra: tuple[str, ...]) -> tuple[str, ...]:
+    roots = _roots(extra)
+    return tuple(sorted({str(hole) for hole in map(_resolve, exclude)
+                         if any(_within(hole, root) for root in roots)}))
+
+
+@functools.lru_cache(maxsize=16)
+def _roots(extra: tuple[str, ...]) -> tuple[Path, ...]:
+    """The readable roots before any hole is cut (sys.path is fixed once this is asked)."""
+    return tuple(_outermost([root for root in _candidate_roots([Path(e) for e in extra])
+                             if root.exists()]))
 
 
 def prime_caches() -> None:
@@ -98,7 +125,7 @@ def _readable_paths_cached(exclude: tuple[str, ...], extra: tuple[str, ...]) -> 
     # list once and every forked child inherits the cache (sys.path is fixed by then).
     holes = {_resolve(p) for p in exclude}
     holes.update(_hidden_installed_paths(), map(Path, SYSTEM_SECRETS))
-    roots = _outermost([root for root in _candidate_roots([Path(e) for e in extra]) if root.exists()])
+    roots = _roots(extra)
     seen: set[Path] = set()
     return tuple(_outermost([path for root in roots
                              for path in _allowed_beneath(root, holes, seen)]))

@@ -8,6 +8,7 @@ create it once and every forked child inherits it ready to use.
 
 from __future__ import annotations
 
+import ast
 import io
 import os
 import sys
@@ -16,6 +17,7 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from IPython.core.inputtransformer2 import TransformerManager
 from IPython.core.interactiveshell import InteractiveShell
 from traitlets.config import Config
 
@@ -57,10 +59,47 @@ class BoundedText(io.TextIOBase):
         return out
 
 
+class PythonFirst(TransformerManager):
+    """IPython's input transformer, without its token passes for a cell that needs none.
+
+    ``transform_cell`` runs line passes (blank first lines, common indentation,
+    pasted prompts, a ``%%`` cell magic), then token passes that tokenize the whole
+    cell, in pure Python, once per special line: about a tenth of a submission's
+    CPU in the worker for a notebook of long cells. Every token pass looks for a
+    token that cannot stand there in Python (``%magic``, ``!cmd``, ``a = %magic``,
+    ``obj?``, an escape at the start of a logical line), so a cell that parses
+    after the line passes comes out of them unchanged: its text is returned as it
+    is then. Any other cell (or any failure here) takes the whole pass, so what
+    runs, or the error, is exactly as before. The static scan parses cells the
+    same way (:class:`autograder.engine.scanipython.CellParser`).
+    """
+
+    def transform_cell(self, cell: str) -> str:
+        text = cell if cell.endswith("\n") else cell + "\n"
+        lines = text.splitlines(keepends=True)
+        try:
+            for transform in self.cleanup_transforms + self.line_transforms:
+                lines = transform(lines)
+            ast.parse("".join(lines))
+        except Exception:  # noqa: BLE001 - the whole transform decides, and reports
+            return super().transform_cell(cell)
+        return "".join(lines)
+
+
 class GradingShell(InteractiveShell):
     """An ``InteractiveShell`` that records tracebacks instead of printing them."""
 
     last_traceback: str = ""
+
+    def should_run_async(self, raw_cell: str, *, transformed_cell: str | None = None,
+                         preprocessing_exc_tuple: Any = None) -> bool:
+        # IPython compiles every cell once more to find a top-level ``await``,
+        # ``async for`` or ``async with``; a cell without either word has none.
+        if transformed_cell is not None and "await" not in transformed_cell \
+                and "async" not in transformed_cell:
+            return False
+        return super().should_run_async(raw_cell, transformed_cell=transformed_cell,
+                                        preprocessing_exc_tuple=preprocessing_exc_tuple)
 
     def _showtraceback(self, etype: Any, evalue: Any, stb: Any) -> None:  # noqa: D401
         text = self.InteractiveTB.stb2text(stb) if isinstance(stb, list) else str(stb)
@@ -80,6 +119,7 @@ def make_shell() -> GradingShell:
     config.InteractiveShell.colors = "NoColor"
     config.InteractiveShell.autoindent = False
     shell = GradingShell.instance(config=config)
+    shell.input_transformer_manager = PythonFirst()
     shell.InteractiveTB.set_mode(mode="Plain")  # a standard traceback, quick to format
     warnings.filterwarnings("ignore", message=".*non-interactive.*cannot be shown")
     warnings.filterwarnings("ignore", message=".*FigureCanvasAgg is non-interactive.*")

@@ -212,3 +212,71 @@ def test_two_assignments_with_the_same_module_names_in_one_process(
     assert verdicts(results[0]) == verdicts(results[2])
     assert verdicts(results[1]) == verdicts(results[3])
     assert results[0].tests[0].score == 2.0 and results[1].tests[0].score == 0.0
+
+
+MARKED = '''
+import warnings
+
+import pytest
+
+
+def _warn():
+    warnings.warn("a numerical warning", RuntimeWarning)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_warning_is_an_error(student):
+    assert student.double(2) == 4
+    _warn()
+
+
+def test_warning_is_only_a_warning(student):
+    _warn()
+    assert student.double(2) == 4
+
+
+@pytest.mark.skip(reason="not graded this term")
+def test_skipped(student):
+    assert student.double(2) == 4
+
+
+@pytest.mark.skipif(True, reason="on this platform")
+def test_skipped_if(student):
+    assert student.double(2) == 4
+
+
+@pytest.fixture
+def broken_fixture():
+    raise ValueError("the fixture broke")
+
+
+def test_uses_broken_fixture(student, broken_fixture):
+    assert student.double(2) == 4
+
+
+def test_prints(student):
+    print("a check's own output")
+    assert student.double(2) == 4
+'''
+
+
+def test_marks_and_fixtures_act_as_in_pytest_s_own_protocol(tmp_path: Path) -> None:
+    """Items run without pytest's reporting hooks (checkrun._run_item) and still honour
+    the markers that change how a check runs: ``filterwarnings`` turns a warning into
+    the check's failure (it stays a warning elsewhere), ``skip`` and ``skipif`` skip
+    it, and a fixture that raises fails it at setup; twice over, in one session."""
+    folder = write_double(tmp_path, "marked", {"test_marked.py": MARKED})
+    right = submission(tmp_path / "in", "a", RIGHT)
+    with Grader(load_assignment(folder)) as grader:
+        runs = [grader.grade(right, id="alice") for _ in range(2)]
+        assert grader._checks is not None and grader._checks._light  # the lighter path ran
+    expected = {
+        "warning_is_an_error": ("check-error", 0.0), "warning_is_only_a_warning": ("ok", 1.0),
+        "skipped": ("check-error", 0.0), "skipped_if": ("check-error", 0.0),
+        "uses_broken_fixture": ("check-error", 0.0), "prints": ("ok", 1.0)}
+    for result in runs:
+        assert {t.name: (t.kind, t.score) for t in result.tests} == expected, verdicts(result)
+        by_name = {t.name: t.output for t in result.tests}
+        assert by_name["skipped"] == by_name["skipped_if"] == \
+            "This check was skipped by the grader."
+    assert verdicts(runs[0]) == verdicts(runs[1])

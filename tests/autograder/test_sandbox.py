@@ -318,6 +318,29 @@ def test_probe_support_is_cached_and_consistent() -> None:
 # ----------------------------------------------------------------------- files
 
 
+def test_exclusions_outside_every_readable_root_change_nothing(tmp_path: Path) -> None:
+    """A batch's submissions each exclude their own folder (outside every readable root):
+    the readable paths are the same, so one shared ruleset serves them all; an excluded
+    path inside a root changes the paths, and the ruleset is not reused for it."""
+    first, second = tmp_path / "s0001" / "hull", tmp_path / "s0002" / "hull"
+    inside = Path(readable._site_packages_dirs()[0]).resolve() / "numpy"
+    assert not any(readable._within(tmp_path.resolve(), root) for root in readable._roots(()))
+    assert readable_paths([REPO, first]) == readable_paths([REPO, second]) \
+        == list(readable._readable_paths_cached((str(REPO), str(second)), ()))  # in full
+    assert readable_paths([REPO, inside]) != readable_paths([REPO])
+    assert readable._readable_paths_cached((str(REPO), str(inside)), ()) \
+        == tuple(readable_paths([REPO, inside]))
+    assert readable.holes_that_matter([REPO, first]) == readable.holes_that_matter([REPO, second])
+    require_landlock(1, "a shared ruleset")
+    root = tmp_path / "work"
+    ruleset = shared_landlock(DEFAULT, root, [REPO, first])
+    try:
+        assert ruleset.serves(DEFAULT, root / "submission-x", [second, REPO])
+        assert not ruleset.serves(DEFAULT, root / "submission-x", [REPO, inside])
+    finally:
+        ruleset.close()
+
+
 @pytest.mark.parametrize("shared", [False, True], ids=["own-ruleset", "shared-ruleset"])
 def test_write_outside_workdir_fails(tmp_path: Path, workdir: Path, shared: bool) -> None:
     require_landlock(1, "confining writes")

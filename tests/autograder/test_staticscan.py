@@ -293,7 +293,8 @@ def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
 
 # -- the parse of plain Python skips IPython's token passes, with the same tree --------
 
-@pytest.mark.parametrize("source", [
+#: cells in IPython syntax, and Python that looks like it
+CELLS = [
     "import scipy.spatial as sp\nH = sp.ConvexHull",
     "\n\n  x = 1\n  y = x % 2",            # blank first lines and common indentation
     "In [1]: x = 1\n   ...: y = x",        # a pasted IPython prompt, which also parses as Python
@@ -303,7 +304,10 @@ def test_bad_forbid_entries_are_usage_errors(forbid: object) -> None:
     "%time x = 1", "!ls -l", "x = %pwd", "y = !echo hi", "len?", "/print 1 2", ",f a b",
     "%%timeit -n 2\nx = 1", "def f():\n    %time g()\n    return 1",
     "x = 1\n\tif x:\n  y",                  # not Python at all: the error comes from the full pass
-])
+]
+
+
+@pytest.mark.parametrize("source", CELLS)
 def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> None:
     from IPython.core.inputtransformer2 import TransformerManager
 
@@ -317,3 +321,43 @@ def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> Non
         theirs = None
     assert (ast.dump(mine) if mine else None) == (ast.dump(theirs) if theirs else None)
     assert (mine is None) == bool(analyzer.errors)
+
+
+@pytest.mark.parametrize("source", [
+    "x = 1\n  # c\ns = \"\"\"\n  a\"\"\"", "  # c\ns = \"\"\"\n  a\"\"\"",  # indentation in strings
+    "print(1)\n>>> x", "x = 1\n... y", "await f()", "async with a:\n    pass",
+    "", "\n\n", "x = 1;", "1/0", "a = [1,\n,2]",
+    *CELLS])
+def test_the_worker_runs_the_text_the_full_transform_gives(source: str) -> None:
+    """The worker's transformer (plain Python skips the token passes) gives the text,
+    or raises the error, of IPython's whole ``transform_cell``."""
+    from IPython.core.inputtransformer2 import TransformerManager
+
+    from autograder.worker.execute import PythonFirst
+
+    def outcome(manager: TransformerManager) -> str:
+        try:
+            return manager.transform_cell(source)
+        except Exception as exc:  # noqa: BLE001 - compared, not handled
+            return f"{type(exc).__name__}: {exc}"
+
+    assert outcome(PythonFirst()) == outcome(TransformerManager())
+
+
+def test_top_level_await_and_magics_still_run_in_the_worker_shell() -> None:
+    """The worker's shell skips IPython's check for top-level ``await`` only in cells
+    without the words ``await`` and ``async``: such cells still run, as do magics."""
+    from autograder.worker.execute import make_shell
+
+    shell = make_shell()
+    try:
+        ran = [shell.run_cell(code, store_history=False).success for code in (
+            "import asyncio\nawait asyncio.sleep(0)\nawaited = 1",
+            "async def g():\n    return 2\nasync_result = await g()",
+            "%time timed = 3\nechoed = !echo hi",
+            "plain = 'no coroutine here'")]
+        assert ran == [True, True, True, True]
+        assert [shell.user_ns[k] for k in ("awaited", "async_result", "timed", "echoed",
+                                           "plain")] == [1, 2, 3, ["hi"], "no coroutine here"]
+    finally:
+        shell.clear_instance()
