@@ -341,7 +341,8 @@ class Grader:
                                          scratch=Path(scratch))
             files = dict(submission.notebooks)
             # the student's parameters cell, read (never run) while the files are here
-            cell = (submitted_values(files.get(self.assignment.notebooks[0].name), spec.cell)
+            cell = (submitted_values(files.get(self.assignment.notebooks[0].name), spec.cell,
+                                     max_bytes=self.options.max_notebook_bytes)
                     if spec is not None else None)
             parts = [(nb.name, self._grade_part(
                 nb.name, files.get(nb.name), submission, seed, out_dir, digest,

@@ -308,11 +308,17 @@ def instructor_values(notebook: Path, cell: str) -> tuple[tuple[str, Any], ...]:
 MAX_SUBMITTED_CELL = 200_000
 
 
-def submitted_values(notebook: Path | None, cell: str) -> dict[str, Any] | None:
+def submitted_values(notebook: Path | None, cell: str, *, max_bytes: int) -> dict[str, Any] | None:
     """The values of a submitted notebook's parameters cell, read with :func:`ast.literal_eval`
-    on the grader's side (never run); ``None`` when it has none or they are not plain values."""
+    on the grader's side (never run); ``None`` when it has none or they are not plain values.
+
+    A file over ``max_bytes`` (the grader's notebook limit, which refuses it anyway) is not
+    read: the size is checked before nbformat parses anything a student sent.
+    """
     try:
-        source = _cell_source(notebook, cell) if notebook is not None else None
+        if notebook is None or notebook.stat().st_size > max_bytes:
+            return None
+        source = _cell_source(notebook, cell)
         if source is None or len(source) > MAX_SUBMITTED_CELL:
             return None
         return _literal_lines(source)

@@ -239,3 +239,17 @@ def test_a_notebook_released_with_variants_but_graded_without_the_secret_is_flag
     flagged = needs_attention([result])
     assert flagged and "NUMGRADE_VARIANT_SECRET is not set here" in " ".join(
         c.detail for c in flagged[0].concerns)
+
+
+def test_a_submitted_parameters_cell_is_read_only_within_the_notebook_limit(
+        tmp_path: Path) -> None:
+    from autograder.engine.variants import submitted_values
+    book = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell("a = 7", metadata={"tags": ["variant"]}),
+        nbformat.v4.new_markdown_cell("x" * 50_000)])
+    path = tmp_path / "scaled.ipynb"
+    nbformat.write(book, str(path))
+    size = path.stat().st_size
+    assert submitted_values(path, "variant", max_bytes=size) == {"a": 7}
+    # over the grader's limit (which refuses the file anyway): not parsed, no evidence
+    assert submitted_values(path, "variant", max_bytes=size - 1) is None
