@@ -30,6 +30,22 @@ from tests.autograder.test_variants import SOLUTION, write_scaled
 SECRET = "the service test's course secret"
 
 
+def course_body(title: str, name: str, assignment: str) -> str:
+    """A course of one assignment ``name`` (the folder ``assignment``), open until 2099."""
+    return f"""
+[course]
+name = "{title}"
+roster = "roster.csv"
+data = "data"
+
+[[assignment]]
+name = "{name}"
+assignment = "{assignment}"
+opens = 2020-01-01T00:00:00Z
+deadline = 2099-01-01T00:00:00Z
+"""
+
+
 @contextlib.contextmanager
 def serving(folder: Path, body: str, students: tuple[str, ...]) -> Iterator[support.Server]:
     """A course server with the course secret in its environment (and this test's)."""
@@ -54,18 +70,7 @@ def serving(folder: Path, body: str, students: tuple[str, ...]) -> Iterator[supp
 def scaled(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[support.Server, Path]]:
     folder = tmp_path_factory.mktemp("variants")
     source = write_scaled(folder)
-    body = """
-[course]
-name = "Variants course"
-roster = "roster.csv"
-data = "data"
-
-[[assignment]]
-name = "scaled"
-assignment = "./scaled"
-opens = 2020-01-01T00:00:00Z
-deadline = 2099-01-01T00:00:00Z
-"""
+    body = course_body("Variants course", "scaled", "./scaled")
     with serving(folder, body, ("ada", "bob", "carl")) as server:
         yield server, source
 
@@ -112,18 +117,7 @@ def test_a_student_off_the_roster_of_variants_is_told_so(
 @pytest.fixture(scope="module")
 def hull(tmp_path_factory: pytest.TempPathFactory) -> Iterator[support.Server]:
     folder = tmp_path_factory.mktemp("hull-variants")
-    body = f"""
-[course]
-name = "Hull variants course"
-roster = "roster.csv"
-data = "data"
-
-[[assignment]]
-name = "hull"
-assignment = "{HULL}"
-opens = 2020-01-01T00:00:00Z
-deadline = 2099-01-01T00:00:00Z
-"""
+    body = course_body("Hull variants course", "hull", str(HULL))
     with serving(folder, body, ("alice", "bob", "carol")) as server:  # on hull's roster.csv
         yield server
 
