@@ -26,6 +26,7 @@ import nbformat
 
 from autograder.engine.assignment import Assignment, load_assignment
 from autograder.engine.notebook import Notebook
+from autograder.engine.released import released_notebook
 from autograder.errors import AssignmentError
 from autograder.results.model import SUBMISSION_NOTE
 
@@ -173,7 +174,7 @@ def _fingerprint(name: str, stamps: tuple[tuple[str, int], ...]) -> Fingerprint:
                 elif meta.get("grade"):
                     tests.append(meta["grade_id"])
         if path == stamps[0][0]:
-            released = _released(nb)
+            released = released_notebook(Path(path))
             if released is not None:
                 template = [_text(c.source).strip() for c in released.cells
                             if c.get("cell_type") == "code" and _text(c.source).strip()]
@@ -194,11 +195,7 @@ def released_answers(path: Path) -> dict[str, str]:
 
 @functools.lru_cache(maxsize=64)
 def _released_answers(path: str, stamp: int) -> tuple[tuple[str, str], ...]:
-    try:
-        released = _released(nbformat.read(path, as_version=4))
-    except (OSError, ValueError) as exc:
-        _LOG.warning("could not read %s for its answer cells: %s", path, exc)
-        return ()
+    released = released_notebook(Path(path))
     if released is None:
         return ()
     found = []
@@ -225,27 +222,6 @@ def unanswered(student: Path, released: dict[str, str]) -> set[str]:
                 _text(cell.get("source", "")).strip() == released[grade_id]:
             found.add(grade_id)
     return found
-
-
-def _released(nb: Any) -> Any:
-    """The student version's cells, by nbgrader's own passes; None without nbgrader.
-
-    The same passes as ``autograder release`` for the cells' text (the authoring room
-    is above this one, so its function cannot be called from here).
-    """
-    try:
-        from nbgrader import preprocessors
-    except ImportError:
-        return None
-    copy = nbformat.from_dict(nb)
-    resources: dict[str, Any] = {}
-    try:
-        for name in ("ClearSolutions", "ClearHiddenTests", "ClearMarkScheme"):
-            copy, resources = getattr(preprocessors, name)(log=_LOG).preprocess(copy, resources)
-    except Exception as exc:  # nbgrader rejects the notebook: release says so; here, no template
-        _LOG.warning("nbgrader could not clear the instructor notebook: %s", exc)
-        return None
-    return copy
 
 
 def _text(source: Any) -> str:
