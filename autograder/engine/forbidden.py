@@ -67,8 +67,8 @@ def scan_sources(rules: Rules, sources: Sequence[str]) -> ScanFindings:
 
 
 def warm_up(rules: Rules) -> None:
-    """An empty scan when something is forbidden: IPython's transformer is imported before
-    the first submission needs it."""
+    """An empty scan when something is forbidden: the scan's modules are imported before
+    the first submission needs them (IPython only on the first cell in IPython syntax)."""
     if rules.forbid:
         staticscan.scan((), rules.forbid)
 

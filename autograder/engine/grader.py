@@ -263,7 +263,7 @@ class Grader:
             if self.check_files:
                 self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0,
                                                   None), assignment_digest(self.assignment))
-            warm_up(self.assignment.rules)  # imports IPython's transformer meanwhile too
+            warm_up(self.assignment.rules)  # imports the static scan meanwhile too
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass

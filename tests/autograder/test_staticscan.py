@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 
 import pytest
 
@@ -321,6 +323,34 @@ def test_plain_python_gets_the_tree_the_full_transform_gives(source: str) -> Non
         theirs = None
     assert (ast.dump(mine) if mine else None) == (ast.dump(theirs) if theirs else None)
     assert (mine is None) == bool(analyzer.errors)
+
+
+@pytest.mark.parametrize("source", [
+    *CELLS, "\rx = 1\ny = 2", "x = 1\r\r  y = 2", "[nav] In [1]: x = 1", "x = [\n...]",
+    "x = (1,\n   ...)", "\fx = 1", "if x:\n    y = 1\n%time z", "def f():\n    return 1"])
+def test_a_cell_parsed_without_ipython_gets_ipythons_tree(source: str) -> None:
+    """A cell that IPython's line passes cannot change is parsed without importing
+    IPython, with the tree (line numbers included) of the full transform."""
+    from IPython.core.inputtransformer2 import TransformerManager
+
+    from autograder.engine.scanipython import _untransformed
+
+    mine = _untransformed(source)
+    if mine is not None:
+        assert ast.dump(mine, include_attributes=True) == ast.dump(
+            ast.parse(TransformerManager().transform_cell(source)), include_attributes=True)
+
+
+def test_plain_python_is_scanned_without_importing_ipython() -> None:
+    code = ("import sys\n"
+            "from autograder.engine.staticscan import scan\n"
+            "scan(['import scipy.spatial as sp\\nH = sp.ConvexHull', 'def f(p):\\n    return p'],"
+            " ['scipy.spatial'])\n"
+            "print('IPython' in sys.modules)\n"
+            "report = scan(['%time import scipy.spatial'], ['scipy.spatial'])\n"
+            "print('IPython' in sys.modules, bool(report.uses))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["False", "True", "True"]
 
 
 @pytest.mark.parametrize("source", [
