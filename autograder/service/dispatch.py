@@ -54,6 +54,7 @@ from autograder.service.storage import Storage
 log = logging.getLogger("autograder.service.dispatch")
 
 #: seconds to wait for a remote scheduler before the job in hand gets an "error" result
+#: (``--dask-connect-timeout`` of ``autograder serve`` replaces it)
 CONNECT_SECONDS = 10.0
 #: seconds a stopping dispatcher waits for the gradings it has out (the pool waits 30)
 DRAIN_SECONDS = 20.0

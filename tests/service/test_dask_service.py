@@ -56,8 +56,9 @@ deadline = 2099-01-01T00:00:00Z
     return support.write_course(folder, body=body, roster=CLASS)
 
 
-def start(folder: Path, dask: str) -> Running:
-    server = support.Server(dask_course(folder), f"sqlite:///{folder / 'course.sqlite3'}", dask=dask)
+def start(folder: Path, dask: str, *options: str) -> Running:
+    server = support.Server(dask_course(folder), f"sqlite:///{folder / 'course.sqlite3'}", dask=dask,
+                            options=options)
     server.start()
     return Running(server)
 
@@ -154,7 +155,8 @@ def test_killed_service_leaves_no_process_and_its_job_is_graded_once(on_dask: Ru
 
 
 def test_unreachable_scheduler_gives_retried_errors_never_a_zero(tmp_path: Path) -> None:
-    running = start(tmp_path, f"tcp://127.0.0.1:{support.free_port()}")  # nothing listens there
+    # nothing listens there; each try waits one second for it (not the default ten)
+    running = start(tmp_path, f"tcp://127.0.0.1:{support.free_port()}", "--dask-connect-timeout", "1")
     try:
         with httpx.Client(timeout=60) as client:
             sub = support.upload(client, running.url, running.tokens["carol"], "hull",
