@@ -7,10 +7,15 @@ the worker processes need not import this file.
 from __future__ import annotations
 
 import os
+import sys
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-from distributed import WorkerPlugin
+import cloudpickle
+import dask
+from distributed import Client, WorkerPlugin
 
 
 class KillWhenGrading(WorkerPlugin):
@@ -59,3 +64,23 @@ class KillWhenGrading(WorkerPlugin):
             os._exit(17)
         if sub_id in self.once and self._first_time(sub_id):
             threading.Timer(self.delay, os._exit, args=(17,)).start()
+
+
+@contextmanager
+def shared_death_cluster(marks: Path, *, killer: str, witness: str) -> Iterator[str]:
+    """A cluster where ``killer``'s grading kills the only worker while ``witness``'s waits there.
+
+    One worker process with two grading slots (so both gradings are sent to it), no
+    death allowed per task (Dask fails every task on the worker at its first death),
+    and :class:`KillWhenGrading` with ``witness`` as the witness: every grading of
+    ``killer`` kills the worker, the first once ``witness``'s grading is on it too.
+    Yields the scheduler's address.
+    """
+    from autograder.runners.dask_cluster import RESOURCE, local_cluster
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        cluster = local_cluster(1, resources={RESOURCE: 2})
+    with cluster, Client(cluster) as client:
+        client.register_plugin(KillWhenGrading(marks, always=(killer,), witnesses=(witness,)))
+        yield cluster.scheduler_address

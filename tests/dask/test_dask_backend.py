@@ -193,15 +193,10 @@ def test_a_grading_that_shared_a_killers_death_is_graded_again_alone(tmp_path: P
     shutil.copy(EXAMPLES / "solution.ipynb", subs / "innocent.ipynb")
     marks = tmp_path / "marks"
     marks.mkdir()
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-        # one worker process with two grading slots: both gradings are sent to it
-        cluster = local_cluster(1, resources={RESOURCE: 2})
-    with cluster, distributed.Client(cluster) as client:
-        client.register_plugin(dask_test_plugins.KillWhenGrading(marks, always=("doomed",),
-                                                                  witnesses=("innocent",)))
-        seen: list[str] = []
-        report = api.grade("hull", [subs], out=tmp_path / "out", dask=cluster.scheduler_address,
-                           options=OPTIONS, progress=False, on_result=lambda r: seen.append(r.id))
+    seen: list[str] = []
+    with dask_test_plugins.shared_death_cluster(marks, killer="doomed", witness="innocent") as address:
+        report = api.grade("hull", [subs], out=tmp_path / "out", dask=address, options=OPTIONS,
+                           progress=False, on_result=lambda r: seen.append(r.id))
     assert (marks / "doomed.shared").exists(), "`doomed` never killed the worker `innocent` was on"
     assert sorted(seen) == ["doomed", "innocent"]  # exactly one result each
     by_id = {r.id: r for r in report.results}
@@ -304,6 +299,9 @@ def test_addresses_on_loopback_and_tls_are_accepted(tmp_path: Path) -> None:
     assert DaskSpec("local:3").local_workers == 3
     with pytest.raises(UsageError, match="local:N"):
         DaskSpec("local:zero")
+    assert DaskSpec("tcp://127.0.0.1:8786", connect_timeout=1.5).connect_timeout == 1.5
+    with pytest.raises(UsageError, match="--dask-connect-timeout"):
+        DaskSpec("tcp://127.0.0.1:8786", connect_timeout=0)
     with pytest.raises(UsageError, match="--tls-ca-file"):
         DaskSpec("tls://grader.example.edu:8786")
     with pytest.raises(UsageError, match="is not a file"):
