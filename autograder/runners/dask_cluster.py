@@ -380,7 +380,8 @@ class DaskBackend:
         empty and nothing else is in flight, each suspect is graded again alone,
         and only a suspect that kills workers while alone gets an ``error`` result.
         Suspects wait for the end of the queue rather than draining the slots at
-        once: the batch keeps every slot busy, and its last results are the same.
+        once: the slots stay busy until then, and a drain mid-batch would idle them
+        for the same lone gradings.
         """
         queue = deque(jobs)
         running: dict[Any, Job] = {}
