@@ -89,6 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="grade only shard K of N (0 <= K < N), chosen by a hash of each id; "
                           "combine the shards' folders with `autograder merge`")
     _cluster_security_options(grd)
+    _connect_timeout_option(grd, default="30")
 
     gsc = commands.add_parser("gradescope", help="write the autograder zip for Gradescope")
     gsc.add_argument("assignment", help="a folder name under assignments/ or a path to one")
@@ -143,6 +144,12 @@ def _cluster_commands(commands: "argparse._SubParsersAction[argparse.ArgumentPar
     _cluster_security_options(wrk)
 
 
+def _connect_timeout_option(parser: argparse.ArgumentParser, *, default: str) -> None:
+    parser.add_argument("--dask-connect-timeout", type=_positive_float, default=None, metavar="SECONDS",
+                        help="how long to keep trying to reach the --dask scheduler before giving "
+                             f"up (default: {default})")
+
+
 def _cluster_security_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--insecure", action="store_true",
                         help="allow a plain tcp:// scheduler on another machine (Dask's messages are "
@@ -172,10 +179,11 @@ def _dask(args: argparse.Namespace) -> "DaskSpec | None":
     from autograder.runners.jobs import DaskSpec
 
     if args.dask is None:
-        if args.insecure or args.tls_ca_file or args.tls_cert:
-            raise UsageError("--insecure and --tls-* options are for --dask ADDRESS.")
+        if args.insecure or args.tls_ca_file or args.tls_cert or args.dask_connect_timeout:
+            raise UsageError("--insecure, --tls-* and --dask-connect-timeout are for --dask ADDRESS.")
         return None
-    return DaskSpec(args.dask, tls=_tls(args), insecure=args.insecure)
+    return DaskSpec(args.dask, tls=_tls(args), insecure=args.insecure,
+                    connect_timeout=args.dask_connect_timeout)
 
 
 def _merge(args: argparse.Namespace) -> int:
@@ -216,6 +224,8 @@ def _service_commands(commands: "argparse._SubParsersAction[argparse.ArgumentPar
                      help="grade on a Dask cluster instead of local grading processes: local:N, "
                           "tls://HOST:PORT, or tcp://127.0.0.1:PORT (needs numgrade[dask])")
     _cluster_security_options(srv)
+    _connect_timeout_option(srv, default="10; the job in hand then gets an error result and "
+                                         "is tried again")
 
     ros = commands.add_parser("roster", help="import a roster CSV (id, name, email[, role], or GitHub "
                                   "Classroom's roster) into a course")

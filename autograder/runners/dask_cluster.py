@@ -17,8 +17,11 @@ How a grading travels:
   arrive, so no shared file system is needed.
 * a student's time-out or crash is a result, never a task error, so Dask never
   retries a student's infinite loop; a worker that dies mid-grade makes Dask run
-  the task elsewhere (``distributed.scheduler.allowed-failures`` times), then the
-  client records an ``error`` result, retried on the next run.
+  the task elsewhere (``distributed.scheduler.allowed-failures`` times). Dask
+  counts a death against every task on the dying worker, so a task that ends as
+  ``KilledWorker`` while other gradings were in flight is only a *suspect*: it
+  is graded again alone (:func:`killed_worker`); one that kills workers while
+  alone gets an ``error`` result, retried on the next run.
 
 :class:`GradingStream` sends gradings with the same pieces one at a time, as
 they arrive: the grading service's dispatcher (``autograder serve --dask``).
@@ -59,7 +62,7 @@ from autograder.runners.bundle import (
     private_directory,
     remove_directory,
 )
-from autograder.runners.jobs import DaskSpec, Finished, Job, TLSFiles, check_address
+from autograder.runners.jobs import CONNECT_SECONDS, DaskSpec, Finished, Job, TLSFiles, check_address
 
 log = logging.getLogger("autograder.dask")
 
@@ -279,14 +282,18 @@ def local_cluster(workers: int, **options: Any) -> LocalCluster:
         return LocalCluster(**settings)
 
 
-def connect(spec: DaskSpec, *, timeout: float = 30.0) -> tuple[LocalCluster | None, Client]:
-    """A client of the cluster ``spec`` names; for ``local:N`` also the cluster, started here."""
+def connect(spec: DaskSpec, *, timeout: float = CONNECT_SECONDS) -> tuple[LocalCluster | None, Client]:
+    """A client of the cluster ``spec`` names; for ``local:N`` also the cluster, started here.
+
+    A remote scheduler is tried for ``spec.connect_timeout`` seconds, else ``timeout``.
+    """
     workers = spec.local_workers
     if workers is not None:
         cluster = local_cluster(workers)
         return cluster, Client(cluster)
+    wait_for = spec.connect_timeout if spec.connect_timeout is not None else timeout
     try:
-        return None, Client(spec.address, security=security_for(spec.tls), timeout=timeout)
+        return None, Client(spec.address, security=security_for(spec.tls), timeout=wait_for)
     except (OSError, TimeoutError) as exc:
         raise UsageError(f"Could not reach the Dask scheduler at {spec.address}: {exc}. "
                          "Is it running, and is the address right?") from None
@@ -296,6 +303,23 @@ def grading_slots(client: Client) -> int:
     """How many gradings the cluster's workers can run at once now."""
     workers = client.scheduler_info(n_workers=-1)["workers"].values()
     return int(sum(w.get("resources", {}).get(RESOURCE, 0) for w in workers))
+
+
+def killed_worker(future: Any) -> bool:
+    """Whether ``future`` ended as ``KilledWorker``: the workers running it died too often.
+
+    Dask counts a worker's death against *every* task processing on that worker,
+    the one it was running and those waiting there (when all workers die at once,
+    Dask hands every waiting task to the first worker back). So a ``KilledWorker``
+    proves nothing about a task that had other gradings beside it in flight: it
+    may have shared a killer's deaths. Such a task is a suspect, graded again
+    alone (a new key: Dask's count starts at zero) with nothing else in flight; a
+    task that kills workers while alone is the killer. Workers die rarely, so the
+    cost, a few gradings run one at a time after a death, is small, and it buys
+    the guarantee that one submission that kills workers never costs another its
+    result.
+    """
+    return future.status == "error" and isinstance(future.exception(), distributed.KilledWorker)
 
 
 class DaskBackend:
@@ -348,14 +372,31 @@ class DaskBackend:
         """Keep one task per grading slot in flight; store each result as it arrives.
 
         Submitting only as many tasks as there are slots (rather than all at once)
-        keeps Dask from queueing several gradings on one worker: when a worker
-        dies, only the grading it was running counts the death, and a
-        submission that kills workers cannot take innocent ones down with it.
+        keeps Dask from queueing several gradings on one worker. That is not
+        enough when every worker dies at once: Dask then hands the waiting tasks
+        to the first worker back, and they share the deaths of whatever runs
+        there. So a task that ends as ``KilledWorker`` after other gradings were in
+        flight beside it is a suspect (:func:`killed_worker`): once the queue is
+        empty and nothing else is in flight, each suspect is graded again alone,
+        and only a suspect that kills workers while alone gets an ``error`` result.
+        Suspects wait for the end of the queue rather than draining the slots at
+        once: the slots stay busy until then, and a drain mid-batch would idle them
+        for the same lone gradings.
         """
         queue = deque(jobs)
         running: dict[Any, Job] = {}
+        shared: set[Any] = set()  # tasks that had another grading in flight beside them
+        suspects: deque[Job] = deque()
         last = time.monotonic()
         capacity, checked = 1, float("-inf")
+
+        def submit(job: Job) -> None:
+            future = client.submit(grade_task, plugin, *submission_bytes(job.path), job.id,
+                                   key=f"grade-{job.id}-{uuid.uuid4().hex[:8]}",
+                                   resources={RESOURCE: 1}, pure=False)
+            if running:
+                shared.update(running, (future,))
+            running[future] = job
 
         def top_up() -> None:
             nonlocal capacity, checked
@@ -363,10 +404,9 @@ class DaskBackend:
             if time.monotonic() - checked >= SLOTS_REFRESH:
                 capacity, checked = max(1, grading_slots(client)), time.monotonic()
             while queue and len(running) < capacity:
-                job = queue.popleft()
-                running[client.submit(grade_task, plugin, *submission_bytes(job.path), job.id,
-                                      key=f"grade-{job.id}-{uuid.uuid4().hex[:8]}",
-                                      resources={RESOURCE: 1}, pure=False)] = job
+                submit(queue.popleft())
+            if not queue and not running and suspects:
+                submit(suspects.popleft())  # alone; the next one waits until it is done
 
         top_up()
         while running:
@@ -378,13 +418,22 @@ class DaskBackend:
                     self._say_worker_problems(client, plugin, quiet=True)
                 if time.monotonic() - last >= self.spec.warn_after:
                     print(f"autograder: warning: no result arrived for {time.monotonic() - last:.0f} s; "
-                          f"{len(running) + len(queue)} submission(s) still to grade on "
-                          f"{grading_slots(client)} grading slot(s).", file=sys.stderr)
+                          f"{len(running) + len(queue) + len(suspects)} submission(s) still to grade "
+                          f"on {grading_slots(client)} grading slot(s).", file=sys.stderr)
                     last = time.monotonic()
                 top_up()
                 continue
             last = time.monotonic()
-            finished_jobs = [(future, running.pop(future)) for future in done]
+            finished_jobs = []
+            for future in done:
+                job = running.pop(future)
+                if future in shared and killed_worker(future):
+                    log.info("%s lost its workers beside other gradings; it is graded again alone",
+                             job.id)
+                    suspects.append(job)
+                else:
+                    finished_jobs.append((future, job))
+                shared.discard(future)
             top_up()  # the freed slots grade on while this client writes the results
             for future, job in finished_jobs:
                 finished(self._store(future, job, assignment, options, out_dir))
@@ -434,7 +483,7 @@ class GradingStream:
     (``numgrade-service-...``), so a batch on the same cluster never closes them.
     """
 
-    def __init__(self, spec: DaskSpec, *, connect_timeout: float = 30.0) -> None:
+    def __init__(self, spec: DaskSpec, *, connect_timeout: float = CONNECT_SECONDS) -> None:
         self.spec = spec
         self.connect_timeout = connect_timeout
         self._cluster: LocalCluster | None = None
@@ -561,4 +610,4 @@ async def _serve(address: str, slots: int, security: Security | None) -> None:
 
 
 __all__ = ["QUIET_CLUSTER", "DaskBackend", "GradingSlots", "GradingStream", "connect", "grade_task",
-           "local_cluster", "payload_files", "quiet_settings", "run_worker", "sandbox_notes", "security_for", "store_payload", "task_payload"]
+           "killed_worker", "local_cluster", "payload_files", "quiet_settings", "run_worker", "sandbox_notes", "security_for", "store_payload", "task_payload"]

@@ -21,6 +21,11 @@ from autograder.errors import UsageError
 from autograder.results.model import SubmissionResult
 
 
+#: seconds a batch keeps trying to reach a remote scheduler (Dask retries a refused
+#: connection until then): a scheduler still starting, or a slow TLS handshake, gets time
+CONNECT_SECONDS = 30.0
+
+
 @dataclass(frozen=True)
 class Job:
     """One submission to grade: the file and its id (its folder under the results)."""
@@ -71,9 +76,16 @@ class DaskSpec:
     insecure: bool = False
     #: seconds without any result after which the client says so (it keeps waiting)
     warn_after: float = 300.0
+    #: seconds to keep trying to reach the scheduler before giving up (``--dask-connect-timeout``);
+    #: None: :data:`CONNECT_SECONDS` for a batch, the service's own (shorter) default for its
+    #: dispatcher, which records the job in hand as an "error" result and tries again
+    connect_timeout: float | None = None
 
     def __post_init__(self) -> None:
         check_address(self.address, tls=self.tls, insecure=self.insecure)
+        if self.connect_timeout is not None and not self.connect_timeout > 0:
+            raise UsageError(f"--dask-connect-timeout {self.connect_timeout}: give a number of "
+                             "seconds above 0 (e.g. 30).")
 
     @property
     def local_workers(self) -> int | None:

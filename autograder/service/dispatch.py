@@ -14,7 +14,14 @@ with :func:`autograder.service.jobqueue.finish`.
 
 An engine failure (the scheduler unreachable or gone, a worker lost, workers
 that refuse the slots) is an "error" result, retried under the course's
-``max_tries`` like a local grader's failure and never shown as a zero. A job
+``max_tries`` like a local grader's failure and never shown as a zero. A
+grading whose workers died while other gradings were out beside it proves
+nothing (Dask counts a death against every task on the dying worker, and when
+all workers die, hands the waiting ones to the first worker back): it is a
+suspect, sent again alone once nothing else is out, with nothing new claimed
+meanwhile, and only one that kills workers alone gets the "error" result
+(:func:`~autograder.runners.dask_cluster.killed_worker`). So a submission that
+kills workers never spends an innocent one's tries. A job
 whose dispatcher died keeps its claim only until its lease runs out; then it is
 taken again, so each job is still recorded once.
 """
@@ -25,6 +32,7 @@ import logging
 import os
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -54,6 +62,7 @@ from autograder.service.storage import Storage
 log = logging.getLogger("autograder.service.dispatch")
 
 #: seconds to wait for a remote scheduler before the job in hand gets an "error" result
+#: (``--dask-connect-timeout`` of ``autograder serve`` replaces it)
 CONNECT_SECONDS = 10.0
 #: seconds a stopping dispatcher waits for the gradings it has out (the pool waits 30)
 DRAIN_SECONDS = 20.0
@@ -74,10 +83,18 @@ class _Flight:
     #: when (``time.monotonic()``) the grading is overdue: past it, its lease is no longer
     #: renewed and it gets an "error" result (retried), as a stuck local grader is replaced
     deadline: float | None = None
+    #: whether another grading was out beside it (its workers' deaths may be another's doing)
+    shared: bool = False
 
     @property
     def title(self) -> str:
         return self.assignment.title if self.assignment is not None else self.submission.assignment
+
+
+def _deadline(assignment: Assignment, options: GradingOptions) -> float:
+    """When a grading sent now is overdue: its whole time budget, with the slack of a local grader."""
+    return (time.monotonic() + OVERRUN_FACTOR * submission_wall_limit(assignment, options)
+            + OVERRUN_SLACK)
 
 
 class _Leases:
@@ -134,6 +151,8 @@ class Dispatcher:
         self.stream = load_dask_backend().GradingStream(settings.dask, connect_timeout=CONNECT_SECONDS)
         self.leases = _Leases(self.factory, settings.lease_seconds)
         self.out: dict[Any, _Flight] = {}
+        self._suspects: deque[_Flight] = deque()  # lost their workers beside others: go again alone
+        self._lone: Any = None  # the suspect out alone, if one is
         self._checked = time.monotonic()
 
     def run(self, stop: Any, parent: int) -> None:
@@ -142,6 +161,9 @@ class Dispatcher:
         try:
             self._warm_up()
             while not stop.is_set() and os.getppid() == parent:
+                if self._suspects and not self.out:
+                    self._send_suspect()
+                    continue
                 if self._room() and self._send_one():
                     continue
                 if self.out:
@@ -150,7 +172,8 @@ class Dispatcher:
                     stop.wait(self.settings.poll_seconds)
             deadline = time.monotonic() + DRAIN_SECONDS
             while self.out and time.monotonic() < deadline and os.getppid() == parent:
-                self._collect(1.0)  # what is left keeps no lease and is graded again later
+                # what is left, and a suspect not sent again, keeps no lease and is graded again later
+                self._collect(1.0)
         finally:
             self.leases.stop()
             try:
@@ -166,6 +189,8 @@ class Dispatcher:
             log.warning("the Dask cluster is not reachable yet: %s", exc)
 
     def _room(self) -> bool:
+        if self._suspects or self._lone in self.out:
+            return False  # a suspect is graded alone: nothing new goes out before it is back
         if not self.stream.connected:
             return not self.out  # claim one job and connect for it (its error if unreachable)
         try:
@@ -184,15 +209,37 @@ class Dispatcher:
         flight = _Flight(job, submission, self.storage.upload_path(submission.sha256))
         try:
             flight = self._prepare(flight)
-            future = self.stream.submit(flight.slots, flight.notebook.read_bytes(),
-                                        flight.notebook.name, submission.user_id)
         except Exception as exc:  # the engine's failure: retried, shown to the instructor
             self._record(flight, self._error(flight, exc))
             if not self.stream.connected:
                 self.stream.close()
             return True
-        self.out[future] = flight
+        self._submit(flight)
         return True
+
+    def _submit(self, flight: _Flight) -> Any:
+        """Send a prepared flight's grading; record its error when it cannot go out."""
+        try:
+            future = self.stream.submit(flight.slots, flight.notebook.read_bytes(),
+                                        flight.notebook.name, flight.submission.user_id)
+        except Exception as exc:  # the engine's failure: retried, shown to the instructor
+            self._record(flight, self._error(flight, exc))
+            if not self.stream.connected:
+                self.stream.close()
+            return None
+        if self.out:
+            self.out = {f: replace(other, shared=True) for f, other in self.out.items()}
+        self.out[future] = replace(flight, shared=bool(self.out))
+        return future
+
+    def _send_suspect(self) -> None:
+        """Send the next suspect alone, with a whole new time budget."""
+        flight = self._suspects.popleft()
+        assert flight.assignment is not None and flight.options is not None
+        deadline = _deadline(flight.assignment, flight.options)
+        flight = replace(flight, deadline=deadline, shared=False)
+        self.leases.hold(flight.job, deadline)
+        self._lone = self._submit(flight)
 
     def _prepare(self, flight: _Flight) -> _Flight:
         if flight.job.tries > self.course.max_tries:  # the dispatcher died this many times with it out
@@ -204,8 +251,7 @@ class Dispatcher:
                               "course file")
         assignment = load_assignment(policy.spec)
         options = GradingOptions(public_only=policy.public_only)
-        deadline = (time.monotonic() + OVERRUN_FACTOR * submission_wall_limit(assignment, options)
-                    + OVERRUN_SLACK)
+        deadline = _deadline(assignment, options)
         self.leases.hold(flight.job, deadline)
         flight = replace(flight, assignment=assignment, options=options, deadline=deadline)
         return replace(flight, slots=self.stream.slots_for(assignment, options))
@@ -219,11 +265,17 @@ class Dispatcher:
             return
         for future in done:
             flight = self.out.pop(future)
-            self._record(flight, self._result(flight, future))
+            if flight.shared and load_dask_backend().killed_worker(future):
+                log.info("job %s lost its workers beside other gradings; it is sent again alone",
+                         flight.job.job_id)
+                self.leases.hold(flight.job)  # renewed while it waits for the others to come back
+                self._suspects.append(flight)
+            else:
+                self._record(flight, self._result(flight, future))
         if not done:
             self._fail_refused()
         self._fail_overdue()
-        self.stream.retire_unused({f.slots for f in self.out.values()})
+        self.stream.retire_unused({f.slots for f in (*self.out.values(), *self._suspects)})
 
     def _result(self, flight: _Flight, future: Any) -> SubmissionResult:
         """The result the cluster sent, its files written into the job's folder; or an error."""
@@ -269,9 +321,11 @@ class Dispatcher:
                     "that stopped answering); it is graded again")))
 
     def _lose_everything(self, exc: BaseException) -> None:
-        """The connection failed: every job out gets an "error" result; the next job connects anew."""
-        out, self.out = self.out, {}
-        for flight in out.values():
+        """The connection failed: every job out or waiting to go out again gets an "error"
+        result; the next job connects anew."""
+        out, self.out = [*self.out.values(), *self._suspects], {}
+        self._suspects.clear()
+        for flight in out:
             self._record(flight, self._error(flight, exc))
         try:
             self.stream.close()

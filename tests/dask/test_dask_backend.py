@@ -128,27 +128,22 @@ def test_dask_gives_the_grades_of_the_local_pool(submissions: list[Path], tmp_pa
     assert again.graded == 0 and again.reused == len(submissions)
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "known bug, open: when both workers die at once, Dask hands the waiting gradings to the "
-    "first worker back, so `sleepy` can share `doomed`'s deaths and end as an error (retried "
-    "on the next run, nothing lost). Since the engine starts faster this happens in most runs "
-    "of this file; a run with one worker instead hung in the rerun. See the closing note of "
-    "2026-12-04."))
 def test_dead_workers_cost_no_result_and_reruns_send_only_what_is_missing(tmp_path: Path) -> None:
     subs = tmp_path / "subs"
-    _notebook(subs / "sleepy.ipynb", "import time\ntime.sleep(4)")
+    _notebook(subs / "sleepy.ipynb", "import time\ntime.sleep(1)")  # killed 0.5 s into it
     _notebook(subs / "doomed.ipynb")
     shutil.copy(EXAMPLES / "solution.ipynb", subs / "solution.ipynb")
     marks = tmp_path / "marks"
     marks.mkdir()
     out = tmp_path / "out"
-    # Dask counts a worker's death against every task queued on it, not only the one
-    # running: allow two deaths so that `sleepy` (killed once by design) survives one
-    # more death shared with `doomed`, which dies three times and becomes an error.
+    # One death allowed per task: `sleepy`, killed once by design, is run again by Dask,
+    # or, when it also shared a death of `doomed` (Dask counts a death against every
+    # task on the worker), graded again alone by the client; `doomed` kills its worker
+    # twice beside the others, then twice alone, and becomes an error.
     # The workers' own directories in a folder of the test's: a killed worker's slot and
     # bundle must go with it (Dask purges a dead worker's directory).
     scratch = tmp_path / "scratch"
-    with dask.config.set({"distributed.scheduler.allowed-failures": 2,
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                           "temporary-directory": str(scratch)}):
         cluster = local_cluster(2)
     with cluster, distributed.Client(cluster) as client:
@@ -180,9 +175,35 @@ def test_dead_workers_cost_no_result_and_reruns_send_only_what_is_missing(tmp_pa
     assert [p.name for p in scratch.rglob("autograder-*")] == [], "a slot or bundle outlived its worker"
     assert list(scratch.rglob("worker-*")) == []
     code = subprocess.run([sys.executable, "-m", "autograder", "grade", "hull", str(subs / "doomed.ipynb"),
-                           "--out", str(tmp_path / "cli"), "--dask", "tcp://127.0.0.1:9", "--no-progress"],
+                           "--out", str(tmp_path / "cli"), "--dask", "tcp://127.0.0.1:9", "--no-progress",
+                           "--dask-connect-timeout", "1"],
                           capture_output=True, text=True)
     assert code.returncode == 2 and "Could not reach the Dask scheduler" in code.stderr
+
+
+def test_a_grading_that_shared_a_killers_death_is_graded_again_alone(tmp_path: Path) -> None:
+    """Two gradings in flight on one worker: `doomed` kills it while `innocent` waits there.
+
+    Dask counts that death against both, and with no death allowed both end as
+    ``KilledWorker``. Neither is final: each is graded again alone, where only
+    `doomed` kills its worker again and gets the error result.
+    """
+    subs = tmp_path / "subs"
+    _notebook(subs / "doomed.ipynb")
+    shutil.copy(EXAMPLES / "solution.ipynb", subs / "innocent.ipynb")
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    seen: list[str] = []
+    with dask_test_plugins.shared_death_cluster(marks, killer="doomed", witness="innocent") as address:
+        report = api.grade("hull", [subs], out=tmp_path / "out", dask=address, options=OPTIONS,
+                           progress=False, on_result=lambda r: seen.append(r.id))
+    assert (marks / "doomed.shared").exists(), "`doomed` never killed the worker `innocent` was on"
+    assert sorted(seen) == ["doomed", "innocent"]  # exactly one result each
+    by_id = {r.id: r for r in report.results}
+    assert by_id["innocent"].outcome == "graded", by_id["innocent"].output
+    assert by_id["innocent"].score == by_id["innocent"].max_score > 0
+    assert by_id["doomed"].outcome == "error" and "regraded on the next run" in by_id["doomed"].output
+    assert [r.id for r in report.failed] == ["doomed"]
 
 
 def _certificates(folder: Path) -> TLSFiles:
@@ -278,6 +299,9 @@ def test_addresses_on_loopback_and_tls_are_accepted(tmp_path: Path) -> None:
     assert DaskSpec("local:3").local_workers == 3
     with pytest.raises(UsageError, match="local:N"):
         DaskSpec("local:zero")
+    assert DaskSpec("tcp://127.0.0.1:8786", connect_timeout=1.5).connect_timeout == 1.5
+    with pytest.raises(UsageError, match="--dask-connect-timeout"):
+        DaskSpec("tcp://127.0.0.1:8786", connect_timeout=0)
     with pytest.raises(UsageError, match="--tls-ca-file"):
         DaskSpec("tls://grader.example.edu:8786")
     with pytest.raises(UsageError, match="is not a file"):

@@ -136,6 +136,8 @@ class Server:
     proc: subprocess.Popen[bytes] | None = None
     #: grade on this Dask cluster (``--dask``) instead of ``jobs`` local grading processes
     dask: str | None = None
+    #: more options of ``autograder serve``
+    options: tuple[str, ...] = ()
 
     @property
     def url(self) -> str:
@@ -146,7 +148,7 @@ class Server:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "autograder", "serve", str(self.course), "--port", str(self.port),
              "--database", self.database, "--lease", str(self.lease),
-             *(["--dask", self.dask] if self.dask else ["--jobs", str(self.jobs)])],
+             *(["--dask", self.dask] if self.dask else ["--jobs", str(self.jobs)]), *self.options],
             stdout=log, stderr=subprocess.STDOUT, cwd=self.course.parent, start_new_session=True)
         deadline = time.monotonic() + START_TIMEOUT
         while True:

@@ -39,13 +39,14 @@ NOTEBOOKS = {name: (support.HULL_EXAMPLES / f"{name}.ipynb").read_bytes()
              for name in ("solution", "wrong-clockwise")}
 
 
-def dask_course(folder: Path) -> Path:
-    """hull, open until 2099 (no late penalty), graded with every check; max_tries is 3."""
-    body = """
+def dask_course(folder: Path, *, max_tries: int = 3) -> Path:
+    """hull, open until 2099 (no late penalty), graded with every check."""
+    body = f"""
 [course]
 name = "Dask service course"
 roster = "roster.csv"
 data = "data"
+max_tries = {max_tries}
 
 [[assignment]]
 name = "hull"
@@ -56,8 +57,9 @@ deadline = 2099-01-01T00:00:00Z
     return support.write_course(folder, body=body, roster=CLASS)
 
 
-def start(folder: Path, dask: str) -> Running:
-    server = support.Server(dask_course(folder), f"sqlite:///{folder / 'course.sqlite3'}", dask=dask)
+def start(folder: Path, dask: str, *options: str, max_tries: int = 3) -> Running:
+    server = support.Server(dask_course(folder, max_tries=max_tries), f"sqlite:///{folder / 'course.sqlite3'}",
+                            dask=dask, options=options)
     server.start()
     return Running(server)
 
@@ -154,7 +156,8 @@ def test_killed_service_leaves_no_process_and_its_job_is_graded_once(on_dask: Ru
 
 
 def test_unreachable_scheduler_gives_retried_errors_never_a_zero(tmp_path: Path) -> None:
-    running = start(tmp_path, f"tcp://127.0.0.1:{support.free_port()}")  # nothing listens there
+    # nothing listens there; each try waits one second for it (not the default ten)
+    running = start(tmp_path, f"tcp://127.0.0.1:{support.free_port()}", "--dask-connect-timeout", "1")
     try:
         with httpx.Client(timeout=60) as client:
             sub = support.upload(client, running.url, running.tokens["carol"], "hull",
@@ -173,6 +176,36 @@ def test_unreachable_scheduler_gives_retried_errors_never_a_zero(tmp_path: Path)
             assert "carol" in failed and "hull" in failed
     finally:
         stop(running)
+
+
+def test_a_job_that_shared_a_killers_death_is_graded_alone_not_failed(tmp_path: Path) -> None:
+    """Two jobs out on one worker with two grading slots: dave's kills the worker while carol's
+    waits there, and Dask (no death allowed) fails both. With one try per job, carol's is sent
+    again alone and graded; dave's kills the worker alone and fails."""
+    from tests.dask import dask_test_plugins
+
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    with dask_test_plugins.shared_death_cluster(marks, killer="dave", witness="carol") as address:
+        running = start(tmp_path / "course", address, max_tries=1)
+        try:
+            with httpx.Client(timeout=60) as client:
+                sent = {who: support.upload(client, running.url, running.tokens[who], "hull",
+                                            NOTEBOOKS["solution"]).json()["id"]
+                        for who in ("dave", "carol")}  # dave's job is claimed first
+                views = {who: support.wait_graded(client, running.url, running.tokens[who], sub)
+                         for who, sub in sent.items()}
+            with running.engine.connect() as db:
+                jobs = {who: db.execute(text("SELECT state, tries FROM jobs WHERE submission_id = :s"),
+                                        {"s": sub}).one() for who, sub in sent.items()}
+        finally:
+            stop(running)
+    assert (marks / "dave.shared").exists(), "dave's grading never killed the worker carol's was on"
+    assert views["carol"]["status"] == "graded", views["carol"]
+    assert views["carol"]["score"] == views["carol"]["max_score"] > 0
+    assert (jobs["carol"].state, jobs["carol"].tries) == ("done", 1)
+    assert views["dave"]["status"] == "error" and views["dave"]["score"] is None
+    assert (jobs["dave"].state, jobs["dave"].tries) == ("failed", 1)
 
 
 def test_serve_names_the_extra_and_refuses_jobs_with_dask(tmp_path: Path) -> None:
