@@ -274,8 +274,13 @@ def local_cluster(workers: int, **options: Any) -> LocalCluster:
     The scheduler, the nannies and (through their nannies) the workers take
     :func:`quiet_settings`, read as each starts.
     """
+    # dashboard_address=None still starts the scheduler's HTTP server on port 8787, and a
+    # second grader on the machine warned that the port was taken: a free loopback port
+    # instead, and no dashboard (nobody looks at a run's own cluster).
     settings: dict[str, Any] = dict(n_workers=workers, threads_per_worker=1, processes=True,
                                     host="127.0.0.1", dashboard_address=None,
+                                    scheduler_kwargs={"dashboard": False,
+                                                      "dashboard_address": "127.0.0.1:0"},
                                     resources={RESOURCE: 1}, silence_logs=logging.ERROR)
     settings.update(options)
     with dask.config.set(quiet_settings()):

@@ -282,6 +282,22 @@ def test_scheduler_of_local_cluster_is_out_of_reach(tmp_path: Path) -> None:
     assert reached == [], f"student code reached ports {reached} (of {scanned})"
 
 
+def test_two_local_clusters_at_once_share_no_port() -> None:
+    """Another grader's `--dask local:N` on the machine: no port taken from the other, no
+    "Port 8787 is already in use" warning, and the scheduler's HTTP server on loopback only."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with local_cluster(1) as first, local_cluster(1) as second:
+            bound = [sock.getsockname() for c in (first, second)
+                     for sock in c.scheduler.http_server._sockets.values()]
+            links = [first.dashboard_link, second.dashboard_link]
+    assert not [str(w.message) for w in caught if "already in use" in str(w.message)]
+    assert {host for host, _ in bound} == {"127.0.0.1"} and 8787 not in {port for _, port in bound}
+    assert len({port for _, port in bound}) == 2, links
+
+
 @pytest.mark.parametrize("address", ["tcp://10.1.2.3:8786", "192.0.2.7:8786", "tcp://[2001:db8::1]:8786"])
 def test_plain_tcp_off_loopback_is_refused_without_insecure(address: str, tmp_path: Path) -> None:
     with pytest.raises(UsageError, match="pickled"):
