@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
 from tests.support import envs
+from tests.support.examples import ExamplesBatch, release_and_grade
 
 
 @pytest.fixture(scope="session")
@@ -45,3 +46,22 @@ def ordinary_user_venv() -> Iterator[tuple[envs.Env, Path]]:
     finally:
         shutil.rmtree(top, ignore_errors=True)
         shutil.rmtree(venv, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def examples_batch(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], ExamplesBatch]:
+    """``examples_batch(name)``: the shipped assignment ``name`` released and its examples
+    graded under several student folders (tests/support/examples.py), once a session.
+
+    test_assignments.py (every copy in its band, the template at zero) and
+    test_unseen_stability.py (one score per example under every seed) read the same
+    batch: each used to grade the examples on its own.
+    """
+    made: dict[str, ExamplesBatch] = {}
+
+    def batch(name: str) -> ExamplesBatch:
+        if name not in made:
+            made[name] = release_and_grade(name, tmp_path_factory.mktemp(f"examples-{name}"))
+        return made[name]
+
+    return batch
