@@ -47,6 +47,7 @@ from typing import Any
 import nbformat
 from nbformat.validator import normalize
 
+from autograder.boundary.limits import MAX_CELLS
 from autograder.errors import NotebookError
 
 __all__ = [
@@ -212,7 +213,10 @@ def parse_notebook(raw: bytes, *, path: str | Path = "upload.ipynb",
     cells = _code_cells(cells_json)
     _check_code_size(cells, max_code_bytes)
     language = _language(nb.get("metadata"))
-    notes = _validation_warnings(nb)
+    # A notebook of more code cells than the worker runs is refused before it runs
+    # (student_process.check_cell_count), so a warning about its format would never be
+    # read; validating its hundreds of thousands of cells cost the grader 10+ s of CPU.
+    notes = _validation_warnings(nb) if len(cells) <= MAX_CELLS else ()
     return Notebook(path=Path(path), cells=cells, nbformat=major, language=language,
                     sha256=hashlib.sha256(raw).hexdigest(), warnings=notes)
 
@@ -451,7 +455,10 @@ def _without_outputs(nb: Any) -> dict[str, Any]:
             cell["outputs"], cell["execution_count"] = [], None
         cells.append(cell)
     document["cells"] = cells
-    return copy.deepcopy(document)
+    # No deep copy here: nbformat's normalize() deep-copies what it is given before it
+    # changes anything (its documented return: "deep-copy of the original object"), and a
+    # second copy doubled the cost of a large notebook.
+    return document
 
 
 def _schema_summary(exc: nbformat.ValidationError) -> str:

@@ -17,6 +17,8 @@ import os
 import shutil
 import subprocess
 import sys
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import nbformat
@@ -129,14 +131,37 @@ def write_batch(folder: Path) -> dict[str, str]:
     return {name: name for name in [*books, "h-many-cells"]}
 
 
-@pytest.fixture(scope="module", params=IDENTITIES)
-def batch(request: pytest.FixtureRequest) -> dict[str, object]:
-    identity = request.param
+@dataclass
+class Launched:
+    """One identity's batch, running in the background; its output goes to files."""
+
+    proc: subprocess.Popen[bytes]
+    out: Path
+    names: dict[str, str]
+    logs: Path
+    started: float
+
+    def wait(self) -> dict[str, object]:
+        left = BATCH_TIMEOUT - (time.monotonic() - self.started)
+        try:
+            self.proc.wait(timeout=max(left, 0))
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+            pytest.fail(f"the batch did not finish within {BATCH_TIMEOUT} s: the grader hangs")
+        proc = subprocess.CompletedProcess(self.proc.args, self.proc.returncode,
+                                           (self.logs / "stdout").read_text(),
+                                           (self.logs / "stderr").read_text())
+        return {"out": self.out, "proc": proc, "names": self.names}
+
+
+def launch(identity: str, request: pytest.FixtureRequest) -> Launched:
+    """Start ``identity``'s batch (the ordinary user's venv is built first, if need be)."""
     env_user, source = request.getfixturevalue("ordinary_user_venv") if identity == "user" else (None, ROOT)
     top = envs.shared_tempdir(f"numgrade-channel-{identity}-")
     request.addfinalizer(lambda: shutil.rmtree(top, ignore_errors=True))
-    books, out, tmp = top / "books", top / "results", top / "tmp"
-    for folder in (books, out, tmp):
+    books, out, tmp, logs = top / "books", top / "results", top / "tmp", top / "logs"
+    for folder in (books, out, tmp, logs):
         folder.mkdir()
         if env_user is not None:
             shutil.chown(folder, env_user.user, env_user.user)
@@ -144,17 +169,38 @@ def batch(request: pytest.FixtureRequest) -> dict[str, object]:
     args = ["-m", "autograder", "grade", str(source / "assignments" / "hull"), str(books),
             "--out", str(out), "--jobs", "1", "--timeout", "20", "--call-timeout", "4",
             "--no-progress"]
-    try:
-        if env_user is None:
-            proc = subprocess.run([sys.executable, *args], capture_output=True, text=True,
-                                  env=dict(os.environ, TMPDIR=str(tmp)), timeout=BATCH_TIMEOUT,
-                                  cwd=top)
-        else:
-            proc = env_user.run("python", *args, cwd=top, timeout=BATCH_TIMEOUT,
-                                env={"TMPDIR": str(tmp)})
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"the batch did not finish within {BATCH_TIMEOUT} s: the grader hangs")
-    return {"out": out, "proc": proc, "names": names}
+    if env_user is None:
+        argv, env = [sys.executable, *args], dict(os.environ, TMPDIR=str(tmp))
+    else:
+        argv, env = env_user.command("python", *args), env_user.environment({"TMPDIR": str(tmp)})
+    with (logs / "stdout").open("wb") as stdout, (logs / "stderr").open("wb") as stderr:
+        proc = subprocess.Popen(argv, cwd=top, env=env, stdout=stdout, stderr=stderr)
+    request.addfinalizer(lambda: proc.poll() is None and (proc.kill(), proc.wait()))
+    return Launched(proc, out, names, logs, time.monotonic())
+
+
+@pytest.fixture(scope="module")
+def launched(request: pytest.FixtureRequest) -> dict[str, Launched]:
+    """Every identity's batch, started at once: each grades on one slot (``--jobs 1``), so on
+    two cores root's batch runs while the ordinary user's venv is built and their batch
+    runs (they used to run one after the other). A root and an ordinary user's grader never
+    share a slot (engine/slot.py). An identity that cannot start (its venv skipped or
+    failed) is left out here; its own ``batch`` asks for the venv again and reports why."""
+    started: dict[str, Launched] = {}
+    for identity in IDENTITIES:
+        try:
+            started[identity] = launch(identity, request)
+        except (Exception, pytest.skip.Exception):
+            continue
+    return started
+
+
+@pytest.fixture(scope="module", params=IDENTITIES)
+def batch(request: pytest.FixtureRequest, launched: dict[str, Launched]) -> dict[str, object]:
+    identity = request.param
+    if identity not in launched:
+        return launch(identity, request).wait()  # raises the venv's skip or error here
+    return launched[identity].wait()
 
 
 def load(batch: dict[str, object], name: str) -> dict[str, object]:

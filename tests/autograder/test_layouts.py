@@ -136,27 +136,20 @@ class Installs:
         return self.futures[name].result(timeout=2 * envs.INSTALL_TIMEOUT)
 
 
-def _ordinary_user_install(workspace: Path, cache: Path) -> tuple[envs.Env, Path] | str:
-    """The ordinary user's ``pip install .`` from a copy of their own; a skip reason if none."""
-    debian = Path("/usr/bin/python3")
-    if envs.can_switch_users() is None and debian.exists():
-        user = envs.ordinary_user()
-        venv = Path(envs.home(user)) / "numgrade-venv"
-        python = str(debian)
-        # A cache of its own: root's installs write into the shared one at the same time.
-        cache = workspace / "pip-cache-user"
-        cache.mkdir()
-        shutil.chown(cache, user, user)
-        source = envs.give_to(user, envs.copy_repository(workspace / "user-src"))
-    elif os.geteuid() != 0:
-        user, venv, python = None, workspace / "venv-wheel", sys.executable
-        source = envs.copy_repository(workspace / "user-src")
-    else:
-        return f"ordinary-user layout not tested: {envs.can_switch_users() or 'no /usr/bin/python3'}"
-    if venv.exists():
-        shutil.rmtree(venv)
-    env = envs.make_venv(venv, install=[str(source), str(source / "reference")], python=python,
-                         user=user, cache=cache)
+def _ordinary_user_install(request: pytest.FixtureRequest) -> tuple[envs.Env, Path] | str:
+    """The ordinary user's ``pip install .`` from a copy of their own, into a venv in their
+    home: the session's (conftest.py), which the engine's other end-to-end tests use too; a
+    skip reason if there is none."""
+    if envs.can_switch_users() is None and Path("/usr/bin/python3").exists():
+        return request.getfixturevalue("ordinary_user_venv")
+    return f"ordinary-user layout not tested: {envs.can_switch_users() or 'no /usr/bin/python3'}"
+
+
+def _own_install(workspace: Path, cache: Path) -> tuple[envs.Env, Path]:
+    """Not root: ``pip install .`` (not editable) by the current user, from a copy."""
+    source = envs.copy_repository(workspace / "user-src")
+    env = envs.make_venv(workspace / "venv-wheel", install=[str(source), str(source / "reference")],
+                         cache=cache)
     return env, source
 
 
@@ -180,12 +173,21 @@ def _gradescope_install(workspace: Path, cache: Path) -> tuple[Path, dict[str, s
 
 
 @pytest.fixture(scope="module")
-def installs(repo: Path, workspace: Path, cache: Path) -> Iterator[Installs]:
-    """Every layout's install, started when the first test of the module asks."""
+def installs(repo: Path, workspace: Path, cache: Path,
+             request: pytest.FixtureRequest) -> Iterator[Installs]:
+    """Every layout's install, started when the first test of the module asks; the ordinary
+    user's is the session's (built here, while the others install, if no test needed it yet)."""
     student = workspace / "student"
     # A suite run from a venv: ``--system-site-packages`` would give the beside venv the
     # *base* interpreter's packages, not this venv's, so it gets its own install.
     in_venv = sys.prefix != sys.base_prefix
+    # The student's install is built from a copy of its own (a build writes into its source),
+    # so it need not wait for the editable installs of ``repo``: as root, the ordinary
+    # user's venv is the session's, and the student's takes its place in the second chain.
+    as_root = os.geteuid() == 0
+    student_step = ("student", lambda: envs.make_venv(
+        student / "venv", install=[str(envs.copy_repository(workspace / "student-src"))],
+        cache=cache))
     chains: list[list[tuple[str, Callable[[], Any]]]] = [[
         ("inside", lambda: envs.make_venv(
             repo / ".venv", install=["-e", str(repo), "-e", str(repo / "reference")], cache=cache)),
@@ -193,12 +195,19 @@ def installs(repo: Path, workspace: Path, cache: Path) -> Iterator[Installs]:
             workspace / "venv-beside", stack=in_venv, system_site=not in_venv, cache=cache,
             install=[*([] if in_venv else ["--no-deps"]), "-e", str(repo),
                      "-e", str(repo / "reference")])),
-        ("student", lambda: envs.make_venv(student / "venv", install=[str(repo)], cache=cache)),
+        *([] if as_root else [student_step]),
     ], [
-        ("user", lambda: _ordinary_user_install(workspace, cache)),
+        *([student_step] if as_root else [("user", lambda: _own_install(workspace, cache))]),
         ("gradescope", lambda: _gradescope_install(workspace, cache)),
     ]]
     made = Installs(chains)
+    if as_root:  # the session's venv: a fixture, so asked for in this thread
+        user: Future[Any] = Future()
+        made.futures["user"] = user
+        try:
+            user.set_result(_ordinary_user_install(request))
+        except Exception as exc:  # reported by the tests that wait for it, as for the others
+            user.set_exception(exc)
     yield made
     for thread in made.threads:
         thread.join(timeout=2 * envs.INSTALL_TIMEOUT)

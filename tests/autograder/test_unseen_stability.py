@@ -2,28 +2,27 @@
 
 Unseen inputs are drawn from the assignment and the student's id. Every shipped
 example is graded under several student ids (so several sets of unseen data) in
-one batch per assignment, through the batch API with two jobs as an instructor
-grades (the id comes from the file's place: ``<student>/<example>.ipynb``), and
-must get the same score under every id: pass lines sit away from where plausible
+one batch per assignment, through the real CLI with two jobs as an instructor
+grades (the id comes from the file's place: ``<student>/<example>.ipynb``; the
+session's batch, ``examples_batch`` in conftest.py, which test_assignments.py reads
+too), and must get the same score under every id: pass lines sit away from where plausible
 submissions fall (a uniform-parameter car fails the chord-length test clearly, a
 correct car passes clearly), whatever the data.
 """
 
 from __future__ import annotations
 
-import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
-from autograder import api
 from autograder.engine.assignment import load_assignment
 from autograder.engine.grader import submission_seed
+from tests.support.examples import EXAMPLE_STUDENTS, ExamplesBatch
 
 ROOT = Path(__file__).resolve().parents[2]
 ASSIGNMENTS = sorted(p.parent.name for p in (ROOT / "assignments").glob("*/assignment.toml"))
-#: student folders: each gives other unseen data
-STUDENTS = [f"student-{k}" for k in range(4)]
 
 pytestmark = pytest.mark.slow
 
@@ -31,28 +30,27 @@ pytestmark = pytest.mark.slow
 def test_the_students_give_different_seeds() -> None:
     """Otherwise the test below would grade the same data several times."""
     assignment = load_assignment("hull")
-    ids = [f"{s}-{e}" for s in STUDENTS for e in ("solution", "wrong-clockwise")]
+    ids = [f"{e}+{s}" for s in EXAMPLE_STUDENTS for e in ("solution", "wrong-clockwise")]
     assert len({submission_seed(assignment, i) for i in ids}) == len(ids)
 
 
 @pytest.mark.parametrize("name", ASSIGNMENTS)
-def test_each_example_gets_one_score_under_every_seed(tmp_path: Path, name: str) -> None:
-    examples = sorted((ROOT / "assignments" / name / "examples").glob("*.ipynb"))
-    for student in STUDENTS:
-        (tmp_path / "in" / student).mkdir(parents=True)
-        for path in examples:
-            shutil.copy(path, tmp_path / "in" / student / path.name)
-    report = api.grade(name, [tmp_path / "in"], out=tmp_path / "out", jobs=2, progress=False)
-    assert len(report.results) == len(STUDENTS) * len(examples)
-    assert len({r.seed for r in report.results}) == len(report.results), "every copy has its own data"
+def test_each_example_gets_one_score_under_every_seed(
+        examples_batch: Callable[[str], ExamplesBatch], name: str) -> None:
+    batch = examples_batch(name)  # every example under each of EXAMPLE_STUDENTS, --jobs 2
+    results = batch.results()
+    assert len(results) == len(EXAMPLE_STUDENTS) * len(batch.examples)
+    assert len({r["extra_data"]["seed"] for r in results}) == len(results), \
+        "every copy has its own data"
     by_example: dict[str, list[tuple[str, float, dict[str, float]]]] = {}
-    for result in report.results:
-        assert result.outcome != "error", f"{name}/{result.id}: {result.output}"
-        by_example.setdefault(Path(result.source).stem, []).append(
-            (result.id, round(result.score, 6), {t.name: t.score for t in result.tests}))
+    for result in results:
+        extra = result["extra_data"]
+        assert extra["outcome"] != "error", f"{name}/{extra['id']}: {result['output']}"
+        by_example.setdefault(Path(extra["source"]).stem, []).append(
+            (extra["id"], round(result["score"], 6), {t["name"]: t["score"] for t in result["tests"]}))
     spread = []
     for stem, graded in sorted(by_example.items()):
-        assert len(graded) == len(STUDENTS)
+        assert len(graded) == len(EXAMPLE_STUDENTS)
         if len({score for _, score, _ in graded}) > 1:
             first = graded[0][2]
             differ = sorted({check for _, _, d in graded for check, s in d.items()

@@ -54,10 +54,14 @@ class Env:
 
     def run(self, *args: str, cwd: Path | None = None, timeout: float = 900,
             env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(self.command(*args), cwd=cwd, env=self.environment(env),
+                              capture_output=True, text=True, timeout=timeout)
+
+    def environment(self, env: dict[str, str] | None = None) -> dict[str, str]:
+        """This process's environment less its Python settings, plus ``env``."""
         merged = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "VIRTUAL_ENV"))}
         merged.update(env or {})
-        return subprocess.run(self.command(*args), cwd=cwd, env=merged, capture_output=True,
-                              text=True, timeout=timeout)
+        return merged
 
 
 def shared_tempdir(prefix: str) -> Path:
