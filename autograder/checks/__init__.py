@@ -19,7 +19,9 @@ An assignment's checks are ordinary pytest functions over the fixtures of
   1-based, transposed, ...): one :class:`Conventions` table per assignment says
   what each broken convention keeps of the points; :meth:`Conventions.record`
   collects what one check found (a :class:`Broken`) and ends the check;
-* calling the student: :func:`explain_errors` turns an exception of a known
+* calling the student: ``student.map(name, [args, ...])`` makes many calls of one
+  function in one batch (an iterator of their values, each call's error raised at its
+  position); :func:`explain_errors` turns an exception of a known
   type (``OverflowError``, ...) into a failure that says how to avoid it;
   :func:`call_for_figure` calls a plotting function and finds its figure;
 * text for messages: :func:`show_number` (every digit that matters, so

@@ -52,7 +52,7 @@ from autograder.boundary import limits, values
 from autograder.errors import UsageError
 
 __all__ = ["MAX_CALLBACKS", "MAX_RECORDED_POINTS", "MAX_RECORDED_BYTES", "ArgumentSummary",
-           "CallRecord", "Traced", "traced", "CallbackRegistry", "limit_message"]
+           "CallRecord", "Traced", "traced", "CallbackRegistry", "holds_callable", "limit_message"]
 
 #: most callbacks answered during one student call (safe functions are not limited)
 MAX_CALLBACKS = 200_000
@@ -317,7 +317,7 @@ def _plain_leaf(x: object) -> bool:
         x, (bool, int, float, complex, str, bytes, np.ndarray, np.generic))
 
 
-def _holds_callable(value: Any, depth: int = 0) -> bool:
+def holds_callable(value: Any, depth: int = 0) -> bool:
     """Whether ``value`` is or contains (in lists, tuples, dicts) something callable;
     fast on long lists of numbers, which most checks pass."""
     if type(value) in _PLAIN_TYPES or depth > limits.MAX_DEPTH:
@@ -331,7 +331,7 @@ def _holds_callable(value: Any, depth: int = 0) -> bool:
         if kinds <= _PLAIN_TYPES | {tuple, list} and all(
                 set(map(type, v)) <= _PLAIN_TYPES for v in value if type(v) in (tuple, list)):
             return False
-        return any(type(v) not in _PLAIN_TYPES and _holds_callable(v, depth + 1) for v in value)
+        return any(type(v) not in _PLAIN_TYPES and holds_callable(v, depth + 1) for v in value)
     return callable(value) and not _plain_leaf(value)
 
 
@@ -361,7 +361,7 @@ class CallbackRegistry:
     def export(self, value: Any, _depth: int = 0) -> Any:
         """``value`` with every callable in it (at any depth of lists, tuples and dicts)
         replaced by a ref registered here; plain values are returned as they are."""
-        if _depth == 0 and not _holds_callable(value):
+        if _depth == 0 and not holds_callable(value):
             return value
         if _plain_leaf(value) or _depth > limits.MAX_DEPTH:
             return value

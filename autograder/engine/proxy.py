@@ -11,7 +11,7 @@ back as a :class:`StudentFunction`, which calls into the worker when called,
 with the same time limit, and dies with the submission.
 
 Both directions meet the same bounds as an ordinary call: a returned function's
-errors are built by :func:`~autograder.engine.student_process.answer_error` (the
+errors are built by :func:`~autograder.engine.answers.answer_error` (the
 same caps, and the fields hidden checks use to show only a short excerpt), and
 figures, in answers or inside returned values, are validated and cut to the
 figure budget here (:mod:`autograder.engine.figuredata`), whatever the worker sent.
@@ -20,12 +20,14 @@ figure budget here (:mod:`autograder.engine.figuredata`), whatever the worker se
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any, Callable, Protocol
 
 from autograder.boundary import values
-from autograder.engine.callbacks import CallbackRegistry, limit_message
+from autograder.engine.batch import Outcome
+from autograder.engine.callbacks import CallbackRegistry, holds_callable, limit_message
 from autograder.engine.figuredata import receive_figures, receive_value
-from autograder.engine.student_process import answer_error
+from autograder.engine.answers import answer_error
 from autograder.errors import (
     ForbiddenUse,
     MissingFunction,
@@ -108,6 +110,40 @@ class Student:
             return self._target.call(name, a, k, timeout=limit, figures=figures)
 
         return self._invoke(send, args, kwargs, what=f"{name}()")
+
+    def map(self, name: str, items: Iterable[Sequence[Any]], *,
+            timeout: float | None = None) -> Iterator[Any]:
+        """Call ``name(*args)`` for each ``args`` in ``items``: an iterator of the values.
+
+        Like ``itertools.starmap``: each item is the tuple (or list) of one call's
+        positional arguments. The calls cross the boundary as one batch
+        (:mod:`autograder.engine.batch`), which costs far less than one crossing per
+        call, and each is still a call of its own: its own time limit, and at its
+        position the iterator raises the error that call raised (the iterator goes
+        on after it). A check may stop reading at any point. Items holding
+        functions are called one by one, as :meth:`call` would.
+        """
+        calls = [_arguments(name, item) for item in items]
+        if self._log.busy:
+            raise UsageError(
+                f"student.map({name!r}, ...) was called from inside a function given to "
+                "student code; call it before or after.")
+        self._log.names.append(name)
+        limit = timeout or self._timeout
+        many = getattr(self._target, "call_many", None)
+        if (name in self._forbidden or (self._functions and name not in self._functions)
+                or many is None or any(holds_callable(args) for args in calls)):
+            return _Results(self, name, self._one_by_one(name, calls, limit), received=True)
+        return _Results(self, name, many(name, calls, timeout=limit))
+
+    def _one_by_one(self, name: str, calls: list[list[Any]], limit: float) -> Iterator[Outcome]:
+        for args in calls:
+            try:
+                value, _ = self.call(name, *args, timeout=limit)
+            except StudentError as exc:
+                yield Outcome(error=exc)
+            else:
+                yield Outcome(value=value)
 
     def figures(self) -> list[Any]:
         """Data of the figures the notebook left open (one dict per figure)."""
@@ -200,3 +236,40 @@ class StudentFunction:
 
         value, _ = self._student._invoke(send, args, kwargs, what=self.what)
         return value
+
+
+def _arguments(name: str, item: Any) -> list[Any]:
+    """One call's positional arguments from an item of ``student.map``."""
+    if not isinstance(item, (tuple, list)):
+        raise UsageError(
+            f"student.map({name!r}, items): each item is the tuple of one call's arguments, "
+            f"like itertools.starmap, not a {type(item).__name__}; write [(x,) for x in xs] "
+            "for a function of one argument.")
+    return list(item)
+
+
+class _Results:
+    """The values of a batch, in order; an item's error is raised at its position and the
+    iteration goes on after it (a generator would end at the first error)."""
+
+    def __init__(self, student: Student, name: str, outcomes: Iterator[Outcome], *,
+                 received: bool = False) -> None:
+        self._student = student
+        self._what = f"{name}()"
+        self._outcomes = outcomes
+        #: the values are already as :meth:`Student.call` returns them
+        self._received = received
+
+    def __iter__(self) -> _Results:
+        return self
+
+    def __next__(self) -> Any:
+        outcome = next(self._outcomes)
+        if outcome.error is not None:
+            raise outcome.error
+        if self._received:
+            return outcome.value
+        returned = f"the function returned by {self._what}"
+        value = values.replace_refs(
+            outcome.value, lambda ref: StudentFunction(self._student, ref, returned))
+        return receive_value(value)

@@ -27,26 +27,26 @@ import socket
 import tempfile
 import termios
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from autograder.boundary import frames, values
+from autograder.boundary import codec, frames
 from autograder.boundary.limits import MAX_CELLS
+from autograder.engine.answers import call_value, describe, is_answer, shown
+from autograder.engine.batch import Batch
 from autograder.engine.slot import GradingSlot
 from autograder.errors import (
     CallTimeout,
     EngineError,
-    ForbiddenUse,
-    MissingFunction,
     NotebookError,
     NotRun,
     ProtocolError,
     ProtocolViolation,
     StudentError,
-    StudentException,
     UnsupportedValue,
     WorkerCrashed,
 )
@@ -165,11 +165,6 @@ def _unread_bytes(sock: socket.socket) -> int:
     return int.from_bytes(raw, "little", signed=True)
 
 
-def _is_answer(message: Any) -> bool:
-    """The answer to a request: a dict with "ok" and no "op" (see autograder.worker.loop)."""
-    return isinstance(message, dict) and "op" not in message and "ok" in message
-
-
 def _cell_report(data: Any) -> CellRun:
     """A :class:`CellRun` from the worker's plain data, every field checked."""
     return CellRun(index=int(data["index"]), ok=bool(data["ok"]),
@@ -229,6 +224,12 @@ class StudentProcess:
     #: set when the first hidden test is given: (its index, the reports and output before it)
     _before: tuple[int, list[CellRun], str] | None = None
     report: NotebookRun | None = None
+    #: a batch whose worker is still sending answers (see :meth:`finish_batch`)
+    _batch: Batch | None = None
+    #: batches sent so far: each is numbered, and its answers carry the number
+    _batches: int = 0
+    #: workers started for this submission
+    _spawns: int = 0
 
     # -- lifecycle -------------------------------------------------------
     def start(self) -> NotebookRun:
@@ -300,7 +301,7 @@ class StudentProcess:
                     op = message.get("op") if isinstance(message, dict) else None
                     if op == "cell":
                         if announced >= len(order) or message.get("index") != order[announced]:
-                            raise _Violation(f"it announced cell {_shown(message.get('index'))} "
+                            raise _Violation(f"it announced cell {shown(message.get('index'))} "
                                              "out of turn")
                         current, announced = order[announced], announced + 1
                     elif op == "need-source":
@@ -314,12 +315,12 @@ class StudentProcess:
                                                str(message.get("stdout", ""))[:OUTPUT_CAP],
                                                [str(f)[:200] for f in message.get("functions", [])[:MAX_FUNCTION_NAMES]])
                     else:
-                        raise _Violation(f"it sent {_describe(message)} while the notebook ran")
+                        raise _Violation(f"it sent {describe(message)} while the notebook ran")
                 except (KeyError, TypeError, ValueError):  # a malformed "ready"
-                    self._violated(f"cell {_shown(current)}", "it sent a malformed report")
+                    self._violated(f"cell {shown(current)}", "it sent a malformed report")
                     return "crash", current, None
                 except _Violation as exc:
-                    self._violated(f"cell {_shown(current)}", str(exc))
+                    self._violated(f"cell {shown(current)}", str(exc))
                     return "crash", current, None
                 except TimeoutError:  # it did not read the source it asked for
                     spent = self._clock.used()
@@ -343,7 +344,7 @@ class StudentProcess:
         """
         index = message.get("index")
         if not self._pending or index != self._pending[0] or index != current:
-            raise _Violation(f"it asked for the source of cell {_shown(index)}, which is "
+            raise _Violation(f"it asked for the source of cell {shown(index)}, which is "
                              "not the hidden test cell it is at")
         if self._before is None:
             reports = [_cell_report(c) for c in message["cells"][:MAX_CELL_REPORTS]]
@@ -372,7 +373,7 @@ class StudentProcess:
                 f"({str(message.get('error', ''))[:200]}). Grading stopped, so no "
                 "student gets a wrong zero; report this with the grader's "
                 "install layout (where Python and its packages live).")
-        raise EngineError(f"the sandboxed worker sent {_describe(message)} before starting; "
+        raise EngineError(f"the sandboxed worker sent {describe(message)} before starting; "
                           "see the grader's log")
 
     def _violated(self, where: str, detail: str) -> None:
@@ -388,6 +389,7 @@ class StudentProcess:
 
     def _spawn(self) -> None:
         self._kill()
+        self._spawns += 1
         self._workdir = Path(tempfile.mkdtemp(prefix="submission-", dir=self.slot.work_root))
         for source, relative in self.data_files:
             target = self._workdir / relative
@@ -484,6 +486,7 @@ class StudentProcess:
             self._workdir = None
 
     def close(self) -> None:
+        self._batch = None  # answers still in flight are not needed: the worker is stopped
         if self._sock is not None:
             try:  # never waited for: a child that does not read is killed just below
                 frames.send_message(self._sock, {"op": "bye"}, wait=_give_up)
@@ -508,15 +511,32 @@ class StudentProcess:
         ``timeout`` is in CPU seconds. Callback requests from the worker (a student
         function calling a function a check passed) are answered in between.
         """
-        self._ensure_worker(what)
+        self.finish_batch()
+        self.ensure_worker(what)
+        with self.limited(what, timeout) as (limit, wall_deadline):
+            self._send(message, limit, wall_deadline)
+            return self._exchange(limit, wall_deadline)
+        raise AssertionError("unreachable")  # limited() raises or the block returned
+
+    @contextmanager
+    def limited(self, what: str, timeout: float) -> Iterator[tuple[float, float]]:
+        """One call's limits: yield ``(CPU limit, wall deadline)`` and turn what goes
+        wrong inside into the student's error.
+
+        The limit is ``timeout`` CPU seconds, or what is left of the submission's
+        budget; the clock counts from the end of the last call (or batch item). A time
+        limit, a violation, an unreadable frame or a lost worker stops the worker and
+        raises :class:`CallTimeout`, :class:`ProtocolViolation`,
+        :class:`UnsupportedValue` or :class:`WorkerCrashed`; the CPU time used is
+        added to the submission's in every case.
+        """
         assert self._sock is not None and self._clock is not None
         limit = min(timeout, self._budget_left())
         spent: float | None = None
         self._clock.start()
         wall_deadline = time.monotonic() + wall_backstop(limit)
         try:
-            self._send(message, limit, wall_deadline)
-            return self._exchange(limit, wall_deadline)
+            yield limit, wall_deadline
         except TimeoutError:
             used = spent = self._clock.used()
             self._kill()
@@ -541,9 +561,10 @@ class StudentProcess:
                 f"{what} ended the worker process (it exited, was killed by a memory or "
                 f"CPU limit, or crashed): {type(exc).__name__}.") from None
         finally:
-            self.cpu_seconds += spent if spent is not None else self._clock.own()
+            if self._clock is not None:
+                self.cpu_seconds += spent if spent is not None else self._clock.own()
 
-    def _ensure_worker(self, what: str) -> None:
+    def ensure_worker(self, what: str) -> None:
         """Raise unless the submission may still make a call; restart its worker if needed."""
         if self._wall_budget_spent():
             raise NotRun(f"{what} was not run: your submission used its whole time budget "
@@ -577,10 +598,10 @@ class StudentProcess:
                 # waits for its answer): a frame now was written by the student's code.
                 raise _Violation("it wrote to the grader's connection without reading what "
                                  "the grader had sent")
-            if _is_answer(message):
+            if is_answer(message):
                 return message  # type: ignore[no-any-return]
             if not (isinstance(message, dict) and message.get("op") == "callback"):
-                raise _Violation(f"it sent {_describe(message)} where the grader expected "
+                raise _Violation(f"it sent {describe(message)} where the grader expected "
                                  "an answer")
             reply = (self.on_callback(message) if self.on_callback is not None else
                      {"op": "callback-result", "ok": False, "error": "no callbacks"})
@@ -592,38 +613,109 @@ class StudentProcess:
              timeout: float, figures: bool = False) -> tuple[Any, list[Any]]:
         """Call the student's ``name(*args, **kwargs)``; return (value, figures)."""
         what = f"{name}()"
-        # Counted only when a time-out needs it: a recursive walk of every argument
-        # cost the grader about 2% of its time on the hull checks.
-        smallest = self.timed_out.get(name)
-        if smallest is not None and payload_size([list(args), kwargs]) >= smallest[0]:
-            raise NotRun(f"{what} was not run on this input, because `{name}` ran out of "
-                         f"time on {smallest[1]}, an input at least as small.")
-        count, earlier = self.strikes.get(name, (0, None))
-        if earlier is not None and count >= MAX_STRIKES:
-            # A function that crashed twice would cost a restart on every remaining
-            # check, starving the other functions' checks.
-            raise NotRun(f"{what} was not run: {earlier} (it did so {count} times, so it "
-                         "was not called again)")
+        refused = self.refusal(name, [list(args), kwargs])
+        if refused is not None:
+            raise refused
         try:
             answer = self.request({"op": "call", "name": name, "args": list(args),
                                    "kwargs": kwargs, "figures": figures},
                                   timeout=timeout, what=what)
-        except CallTimeout:
-            size = payload_size([list(args), kwargs])
-            where = self.current_check or f"an input of size {size}"
-            self.timed_out[name] = (min(size, self.timed_out.get(name, (size, ""))[0]), where)
+        except (CallTimeout, WorkerCrashed) as exc:
+            self.note_failure(name, [list(args), kwargs], exc, self.current_check)
             raise
-        except WorkerCrashed as exc:
-            self.strikes[name] = (count + 1, exc)
-            raise
-        if not answer.get("ok"):
-            raise answer_error(name, answer)
-        value = answer.get("value")
-        if isinstance(value, values.Unsupported):
-            raise UnsupportedValue(
-                f"{name} returned a {value.type[:100]}, which the grader cannot read: return "
-                "a number, a list or tuple of numbers, or a numpy array.")
-        return value, list(answer.get("figures", []))
+        return call_value(name, answer), list(answer.get("figures", []))
+
+    def refusal(self, name: str, arguments: Any) -> NotRun | None:
+        """Why ``name`` is not called on ``arguments`` at all, if it is not: it ran out of
+        time on an input at least as small, or crashed the worker too often."""
+        what = f"{name}()"
+        # Counted only when a time-out needs it: a recursive walk of every argument
+        # cost the grader about 2% of its time on the hull checks.
+        smallest = self.timed_out.get(name)
+        if smallest is not None and payload_size(arguments) >= smallest[0]:
+            return NotRun(f"{what} was not run on this input, because `{name}` ran out of "
+                          f"time on {smallest[1]}, an input at least as small.")
+        count, earlier = self.strikes.get(name, (0, None))
+        if earlier is not None and count >= MAX_STRIKES:
+            # A function that crashed twice would cost a restart on every remaining
+            # check, starving the other functions' checks.
+            return NotRun(f"{what} was not run: {earlier} (it did so {count} times, so it "
+                          "was not called again)")
+        return None
+
+    def note_failure(self, name: str, arguments: Any, error: StudentError, where: str) -> None:
+        """Remember a call of ``name`` that ran out of time or crashed the worker (see
+        :meth:`refusal`); ``where`` names the check, for the message."""
+        if isinstance(error, CallTimeout):
+            size = payload_size(arguments)
+            self.timed_out[name] = (min(size, self.timed_out.get(name, (size, ""))[0]),
+                                    where or f"an input of size {size}")
+        elif isinstance(error, WorkerCrashed):
+            count, _ = self.strikes.get(name, (0, None))
+            self.strikes[name] = (count + 1, error)
+
+    def call_many(self, name: str, items: Sequence[list[Any]], *, timeout: float) -> Batch:
+        """Calls ``name(*args)`` for each ``args`` in ``items``, sent as one batch; an
+        iterator of one :class:`~autograder.engine.batch.Outcome` per item, in order
+        (see :mod:`autograder.engine.batch`)."""
+        self.finish_batch()
+        return Batch(self, name, items, timeout=timeout, where=self.current_check)
+
+    # -- the wire of a batch (see autograder.engine.batch) ----------------------
+    def worker(self) -> int | None:
+        """Which worker runs now (the count of workers started), None when none does: a
+        batch's answers come only from the worker it was sent to."""
+        return self._spawns if self._sock is not None else None
+
+    def stop_worker(self) -> None:
+        """Stop the worker; the next call starts the notebook again."""
+        self._kill()
+
+    def send_batch(self, name: str, items: Sequence[list[Any]], limit: float,
+                   wall_deadline: float) -> int:
+        """Send the calls of a batch (inside :meth:`limited`); return the batch's number.
+
+        Raises ``ProtocolError`` before sending anything when the items do not fit in
+        one frame (the caller sends fewer)."""
+        assert self._sock is not None
+        number = self._batches + 1
+        tree, buffers = codec.encode({"op": "map", "batch": number, "name": name,
+                                      "items": list(items)})
+        frames.send_frame(self._sock, tree, buffers, wait=lambda sock: self._wait_for(
+            sock, limit, wall_deadline, write=True))
+        self._batches = number
+        return number
+
+    def receive_item(self, batch: int, index: int, limit: float,
+                     wall_deadline: float) -> dict[str, Any]:
+        """The answer to call ``index`` of ``batch`` (inside :meth:`limited`). Any other
+        frame is the student's violation: an answer out of order, a second answer to
+        one call, an answer to another batch, or any other request."""
+        message = self._await(limit, wall_deadline)
+        assert self._sock is not None
+        if _unread_bytes(self._sock):
+            raise _Violation("it wrote to the grader's connection before reading the batch")
+        if not (isinstance(message, dict) and message.get("op") == "item"
+                and message.get("batch") == batch and message.get("i") == index
+                and "ok" in message):
+            raise _Violation(f"it sent {describe(message)} where the grader expected the "
+                             f"answer to call {index + 1} of a batch")
+        return message
+
+    def receive_done(self, batch: int, count: int, limit: float, wall_deadline: float) -> None:
+        """The worker's word that ``batch`` ended after ``count`` answers; anything else
+        (one answer more, say) is the student's violation."""
+        message = self._await(limit, wall_deadline)
+        if not (isinstance(message, dict) and message.get("op") == "map-done"
+                and message.get("batch") == batch and message.get("count") == count):
+            raise _Violation(f"it sent {describe(message)} after the last answer of a batch")
+
+    def finish_batch(self) -> None:
+        """Read the answers of a batch still in flight (see :meth:`Batch.drain`), so the
+        worker can take a new request."""
+        batch, self._batch = self._batch, None
+        if batch is not None:
+            batch.drain()
 
     def figures(self, *, timeout: float) -> list[Any]:
         answer = self.request({"op": "figures"}, timeout=timeout, what="drawing your figures")
@@ -633,48 +725,6 @@ class StudentProcess:
 def _give_up(sock: socket.socket) -> None:
     """A send's wait that does not wait (see :func:`autograder.boundary.frames.send_frame`)."""
     raise TimeoutError("the worker is not reading")
-
-
-def _shown(value: Any) -> str:
-    """A value from the child, short enough for a message (a cell index counts from 1)."""
-    if type(value) is int:
-        return str(value + 1)
-    return repr(value)[:40] if isinstance(value, (str, float)) else "?"
-
-
-def _describe(message: Any) -> str:
-    """What kind of frame the child sent, for a message."""
-    if isinstance(message, dict):
-        op = message.get("op")
-        return f"a {str(op)[:40]!r} frame" if isinstance(op, str) else "a frame without a known op"
-    return f"a frame holding a {type(message).__name__}"
-
-
-def answer_error(name: str, answer: dict[str, Any]) -> Exception:
-    """The error a failed answer stands for, every field cut to size (the proxy uses it
-    for the functions a student returned, so both kinds of call meet the same caps)."""
-    error = answer.get("error")
-    if error == "missing":
-        return MissingFunction(
-            f"Your notebook does not define `{name}`. Define a function with exactly this "
-            "name at the top level of a code cell, and run every cell before submitting.")
-    if error == "not-callable":
-        return MissingFunction(
-            f"`{name}` in your notebook is a {str(answer.get('type'))[:100]}, not a function.")
-    if error == "exception" and answer.get("type") == "NotAllowedError":
-        # Raised by the worker's guard when code reached a forbidden library at run time.
-        return ForbiddenUse(f"{name} used a library this assignment does not allow: "
-                            f"{str(answer.get('message', ''))[:500]}")
-    if error == "exception":
-        exc_type = str(answer.get("type", ""))[:100]
-        detail = str(answer.get("message", ""))[:2000]
-        return StudentException(f"{name} raised {exc_type}: {detail}",
-                                traceback=str(answer.get("traceback", ""))[:20_000],
-                                function=name, exc_type=exc_type, detail=detail)
-    if error == "unsupported":
-        return UnsupportedValue(
-            f"{name} returned a value the grader cannot read ({str(answer.get('message'))[:300]}).")
-    return WorkerCrashed(f"{name}: the worker answered {str(error)[:100]!r}.")
 
 
 def _policy_to_wire(policy: IsolationPolicy) -> dict[str, Any]:

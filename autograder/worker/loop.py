@@ -20,6 +20,12 @@ raises :class:`StaleCallback`.
 A function the student *returns* is kept in a table here and crosses as a
 ref; the grader calls it with ``{"op": "call-ref", "id", "args", "kwargs"}``.
 
+Batches
+-------
+``{"op": "map", "batch", "name", "items"}`` asks for many calls of one function
+(:func:`serve_map`): each is answered in a frame of its own, tagged with the batch
+and the call's position, and ``map-done`` follows the last.
+
 Forked children
 ---------------
 Only the process that serves owns the socket (:func:`protect_channel`): a child the
@@ -329,17 +335,44 @@ def serve(sock: socket.socket, shell: GradingShell, output: BoundedText) -> None
             return
         if not isinstance(request, dict) or request.get("op") == "bye":
             return
+        if request.get("op") == "map":
+            serve_map(shell, output, request, channel)
+            continue
         answer = handle(shell, output, request, channel)
         leave_if_forked()  # a child the call forked, unwound back to here: not its answer
         send_answer(sock, answer, channel)
 
 
+def serve_map(shell: GradingShell, output: BoundedText, request: dict[str, Any],
+              channel: Channel) -> None:
+    """Answer a batch: one ``item`` frame per call, in order, then ``map-done``.
+
+    ``{"op": "map", "batch": b, "name": name, "items": [args, ...]}`` calls
+    ``name(*args)`` for each item, as one ``call`` request each would (each item's
+    answer is framed alone, so the frame limit holds per answer, and an answer that
+    cannot be framed is that item's "unsupported" answer). The grader reads each
+    answer under the item's own time limit while the next item runs.
+    """
+    batch, name, items = request.get("batch"), request.get("name"), request.get("items")
+    if type(batch) is not int or not isinstance(items, list):
+        items = []
+    for i, args in enumerate(items):
+        answer = _call(shell, channel, {"name": name, "args": args, "kwargs": {}})
+        answer.update(op="item", batch=batch, i=i, stdout=output.take())
+        leave_if_forked()  # a child the call forked, unwound back to here: not its answer
+        send_answer(channel.sock, answer, channel)
+    leave_if_forked()
+    frames.send_message(channel.sock, {"op": "map-done", "batch": batch, "count": len(items)})
+
+
 def send_answer(sock: socket.socket, answer: dict[str, Any], channel: Channel | None = None) -> None:
-    """Send ``answer``; a value that cannot be framed becomes an 'unsupported' answer."""
+    """Send ``answer``; a value that cannot be framed becomes an 'unsupported' answer
+    (with the answer's batch tags, when it answers an item of a batch)."""
     export = channel.export if channel is not None else None
     try:
         frames.send_message(sock, answer, figure_encoder=figures.figure_to_data,
                               callable_encoder=export)
     except ProtocolError as exc:
+        tags = {k: answer[k] for k in ("op", "batch", "i") if k in answer}
         frames.send_message(sock, {"ok": False, "error": "unsupported",
-                                     "message": str(exc), "stdout": ""})
+                                     "message": str(exc), "stdout": "", **tags})

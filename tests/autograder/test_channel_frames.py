@@ -9,9 +9,7 @@ are in ``test_channel.py``.
 
 from __future__ import annotations
 
-import json
 import socket
-import struct
 import threading
 import time
 from pathlib import Path
@@ -25,24 +23,10 @@ from autograder.boundary.limits import MAX_CELLS
 from autograder.engine.student_process import NotebookRun, StudentProcess, check_cell_count
 from autograder.errors import CallTimeout, NotebookError, ProtocolViolation
 from autograder.sandbox.policy import IsolationPolicy
+from tests.support.peers import IdleClock, frame
 
 #: generous: a wait that should end after the 1 s backstop but hangs fails the test
 HANG = 60.0
-
-
-class IdleClock:
-    """A child that uses no CPU: only the wall-clock backstop can end a wait."""
-
-    def start(self) -> None: ...
-    def used(self) -> float: return 0.0
-    def own(self) -> float: return 0.0
-    def queued(self) -> float: return 0.0
-    def close(self) -> None: ...
-
-
-def frame(value: Any) -> bytes:
-    header = json.dumps({"v": value, "bufs": []}).encode()
-    return struct.pack(">I", len(header)) + header
 
 
 def session(sock: socket.socket) -> StudentProcess:

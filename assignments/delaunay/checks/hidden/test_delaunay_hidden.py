@@ -190,9 +190,9 @@ CIRCLE_CASES: dict[str, Dataset[list[Quad]]] = {
 def test_in_circle(student: Student, credit: Credit, rng: np.random.Generator,
                    name: str) -> None:
     dataset = CIRCLE_CASES[name]
-    cases: list[tuple[Quad, object, int]] = []
-    for a, b, c, d in dataset.build(rng):
-        cases.append(((a, b, c, d), student.in_circle(a, b, c, d), incircle(a, b, c, d)))
+    quads = [tuple(quad) for quad in dataset.build(rng)]  # (a, b, c, d): one call each
+    cases: list[tuple[Quad, object, int]] = [
+        (quad, got, incircle(*quad)) for quad, got in zip(quads, student.map("in_circle", quads))]
     fb.judge_in_circle(cases, hint=dataset.hint, credit=credit)
 
 

@@ -71,9 +71,9 @@ def lake_depth(points: np.ndarray) -> np.ndarray:
 
 @over_datasets(CIRCLES, "case", points=1)
 def test_in_circle_small(student: Student, credit: Credit, case: str) -> None:
-    cases = []
-    for a, b, c, d, where in CIRCLES[case]:
-        cases.append(((a, b, c, d), student.in_circle(a, b, c, d), where))
+    quads = [(a, b, c, d) for a, b, c, d, _ in CIRCLES[case]]
+    answers = student.map("in_circle", quads)  # one batch
+    cases = [(quad, got, row[4]) for quad, got, row in zip(quads, answers, CIRCLES[case])]
     fb.judge_in_circle(cases, credit=credit)
 
 

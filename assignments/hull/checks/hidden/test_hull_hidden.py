@@ -151,22 +151,24 @@ PERMUTATIONS = [((0, 1, 2), 1), ((1, 2, 0), 1), ((2, 0, 1), 1),
 @over_datasets(TRIPLES)
 def test_orientation(student: Student, rng: np.random.Generator, name: str) -> None:
     dataset = TRIPLES[name]
-    for p, q, r in dataset.build(rng):
-        got = student.orientation(p, q, r)
+    triples = dataset.build(rng)
+    for (p, q, r), got in zip(triples, student.map("orientation", triples)):
         feedback.judge_turn(got, p, q, r, orient2d(p, q, r), hint=dataset.hint)
 
 
 @pytest.mark.points(1)
 def test_orientation_symmetry(student: Student, rng: np.random.Generator) -> None:
+    calls = []  # (arguments, expected sign)
     for triple in _unseen_near_collinear(rng, count=3):
         sign = orient2d(*triple)
         for order, factor in PERMUTATIONS:
-            args = [np.array(triple[k]) for k in order]  # numpy points this time
-            got = student.orientation(*args)
-            feedback.judge_turn(
-                got, *args, sign * factor,
-                hint="These are the same three points in another order: cycling them keeps "
-                     "the turn and swapping two reverses it. " + NEAR_COLLINEAR_HINT)
+            calls.append(([np.array(triple[k]) for k in order], sign * factor))  # numpy points
+    answers = student.map("orientation", [args for args, _ in calls])
+    for (args, expected), got in zip(calls, answers):
+        feedback.judge_turn(
+            got, *args, expected,
+            hint="These are the same three points in another order: cycling them keeps "
+                 "the turn and swapping two reverses it. " + NEAR_COLLINEAR_HINT)
 
 
 # ---------------------------------------------------------------------------

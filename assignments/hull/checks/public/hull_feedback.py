@@ -13,7 +13,7 @@ An orientation check calls :func:`judge_turn` for each triple.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -206,16 +206,23 @@ def _signed(value: int) -> str:
     return f"{value:+d}" if value else "0"
 
 
-def require_general_turns(orientation: Callable[..., object], what: str) -> None:
-    """Fail unless ``orientation`` gets a left and a right turn right.
+#: (p, q, r, sign of the turn): a left and a right turn each, for require_general_turns
+GENERAL_TURNS = [((0, 0), (1, 0), (0, 1), 1), ((0, 0), (0, 1), (1, 0), -1),
+                 ((1, 1), (4, 2), (2, 5), 1), ((3, 3), (5, 1), (1, 0), -1)]
 
-    ``return 0`` answers every collinear triple; collinear cases are earned only by a
-    function that also tells the two turns apart.
+
+def require_general_turns(answers: Iterator[object], what: str) -> None:
+    """Fail unless orientation gets a left and a right turn right.
+
+    ``answers`` yields orientation's answers on :data:`GENERAL_TURNS` first, in order
+    (``student.map("orientation", ...)`` over them and then the check's own triples);
+    exactly ``len(GENERAL_TURNS)`` are read. ``return 0`` answers every collinear
+    triple; collinear cases are earned only by a function that also tells the two
+    turns apart.
     """
-    for p, q, r, expected in (((0, 0), (1, 0), (0, 1), 1), ((0, 0), (0, 1), (1, 0), -1),
-                              ((1, 1), (4, 2), (2, 5), 1), ((3, 3), (5, 1), (1, 0), -1)):
+    for (p, q, r, expected), got in zip(GENERAL_TURNS, answers):
         try:
-            judge_turn(orientation(p, q, r), p, q, r, expected)
+            judge_turn(got, p, q, r, expected)
         except CheckFailure as exc:
             raise CheckFailure(f"The {what} earn points only when orientation also tells "
                                f"left turns from right turns, and it does not: {exc}") from None

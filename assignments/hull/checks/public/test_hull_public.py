@@ -64,10 +64,13 @@ PINS_BOUNDARY = [12, 5, 4, 1, 7, 14, 26, 15, 8, 28]
 
 @over_datasets(TURNS, "case", points=1)
 def test_orientation_small(student: Student, case: str) -> None:
-    if case == "collinear":
-        feedback.require_general_turns(student.orientation, "collinear cases")
-    for p, q, r, expected in TURNS[case]:
-        feedback.judge_turn(student.orientation(p, q, r), p, q, r, expected)
+    general = feedback.GENERAL_TURNS if case == "collinear" else []
+    # one batch: the general turns (for the collinear case), then the case's own triples
+    answers = student.map("orientation", [(p, q, r) for p, q, r, _ in general + TURNS[case]])
+    if general:
+        feedback.require_general_turns(answers, "collinear cases")
+    for (p, q, r, expected), got in zip(TURNS[case], answers):
+        feedback.judge_turn(got, p, q, r, expected)
 
 
 @over_datasets(HULLS, "case", points=1)
