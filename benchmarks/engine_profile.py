@@ -186,7 +186,7 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
         op = message.get("op") if isinstance(message, dict) else None
         probe = current()
         if op in ("started", "ready") and self._pid is not None:
-            probe.child[op] = process_cpu_seconds(self._pid)
+            probe.child[op] = process_cpu_seconds(self._pid, below=True)
         if op == "started" and probe.spawned is not None:
             wall, cpu, fork = probe.spawned
             probe.add("worker start/sandbox", time.perf_counter() - wall,
@@ -211,7 +211,7 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
     def read_then_kill(pid: int, pidfd: int | None) -> None:
         probe = current()
         if "ready" in probe.child:  # the child's time answering the checks' calls
-            probe.worker["checks"] += max(0.0, process_cpu_seconds(pid) - probe.child.pop("ready"))
+            probe.worker["checks"] += max(0.0, process_cpu_seconds(pid, below=True) - probe.child.pop("ready"))
         timed_kill(pid, pidfd)
 
     def sweep(policy: Any, slot: int, warm_parent: int | None, child: Any = None) -> None:
@@ -230,15 +230,26 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
     grader.CheckSuite.run = timed(current, "pytest", grader.CheckSuite.run)
 
 
-def process_cpu_seconds(pid: int) -> float:
-    """CPU seconds of the process ``pid``: the sum of its threads' ``schedstat``; from
-    ``/proc/<pid>/stat`` where those files are missing; 0.0 when it is gone."""
+def process_cpu_seconds(pid: int, *, below: bool = False, _depth: int = 0) -> float:
+    """CPU seconds of the process ``pid`` (with ``below``, and of the processes below it
+    that still run): the sum of their threads' ``schedstat``; from ``/proc/<pid>/stat``
+    where those files are missing; 0.0 when it is gone.
+
+    A submission's child is read with ``below``: with a PID namespace (as root), the
+    child the grader forked is a relay and the student's code runs in its child
+    (:mod:`autograder.sandbox.pidns`).
+    """
     try:
         total = 0
+        children: list[int] = []
         for task in os.listdir(f"/proc/{pid}/task"):
             with open(f"/proc/{pid}/task/{task}/schedstat", "rb") as handle:
                 total += int(handle.read().split()[0])
-        return total / 1e9
+            if below and _depth < 3:
+                with open(f"/proc/{pid}/task/{task}/children", "rb") as handle:
+                    children += [int(c) for c in handle.read().split()]
+        return total / 1e9 + sum(process_cpu_seconds(c, below=True, _depth=_depth + 1)
+                                 for c in children)
     except (OSError, ValueError, IndexError):
         return _stat_cpu_seconds(pid)
 

@@ -130,3 +130,36 @@ def test_wrong_notebooks_in_a_batch_are_never_a_silent_zero(tmp_path: Path) -> N
     page = (out / "summary.html").read_text()
     assert "spline_car notebook, not hull" in page and "released template" in page
     assert "Nothing needs a person" not in page
+
+
+def test_the_neighbours_are_read_again_when_they_change(tmp_path: Path) -> None:
+    """The assignments beside this one are kept between submissions, never past a change."""
+    import os
+
+    from autograder.engine.identify import known_fingerprints
+
+    course = tmp_path / "assignments"
+    shutil.copytree(HULL, course / "hull", ignore=shutil.ignore_patterns("examples"))
+    shutil.copytree(CAR, course / "spline_car", ignore=shutil.ignore_patterns("examples"))
+    hull = load_assignment(course / "hull")
+    solution = read_notebook(CAR / "examples" / "solution.ipynb")
+    assert [f.name for f in known_fingerprints(hull)] == ["spline_car"]
+    assert identify(solution, hull).other == "spline_car"
+
+    # the neighbour's notebook changes (its cells are someone else's now): read again
+    notebook = course / "spline_car" / "spline_car.ipynb"
+    book = nbformat.read(notebook, as_version=4)
+    for k, cell in enumerate(book.cells):
+        cell["id"] = f"renamed-{k}"
+        cell.metadata.pop("nbgrader", None)
+    nbformat.write(book, notebook)
+    os.utime(notebook, ns=(1, 2_000_000_000_000_000_000))  # a new stamp, however coarse the clock
+    assert identify(solution, hull).other == ""
+
+    # its assignment.toml changes (a broken one is skipped), then the folder goes away
+    toml = course / "spline_car" / "assignment.toml"
+    toml.write_text("this is not TOML [")
+    os.utime(toml, ns=(1, 3_000_000_000_000_000_000))
+    assert known_fingerprints(hull) == ()
+    shutil.rmtree(course / "spline_car")
+    assert known_fingerprints(hull) == ()
