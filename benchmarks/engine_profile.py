@@ -268,6 +268,10 @@ def main() -> None:
     parser.add_argument("--trivial", action="store_true",
                         help="profile the one-cell, one-check assignment of engine_vs_peers.py "
                         "instead of hull (the engine's own overhead)")
+    parser.add_argument("--released", action="store_true",
+                        help="hull submissions written into the released notebook (every cell "
+                        "of it, its test cells too), as engine_vs_peers.py grades them, instead "
+                        "of the three-cell examples")
     options = parser.parse_args()
 
     before = None if options.no_before else load_before(options.before)
@@ -282,11 +286,16 @@ def main() -> None:
             from engine_vs_peers import write_trivial
             folder, batch = write_trivial(Path(tmp), 2)
             examples = sorted(batch.glob("*.ipynb"))
+        elif options.released:
+            sys.path.insert(0, str(ROOT / "benchmarks"))
+            from grade_vs_nbgrader import build_batch
+            folder, examples = HULL, build_batch(Path(tmp) / "submitted", 6)
         else:
             folder, examples = HULL, sorted((HULL / "examples").glob("*.ipynb"))
         rows = profile(folder, examples, options.count, probes, old_sweep, scan_pairs)
     report(rows, scan_pairs, before is not None, options.before,
-           "trivial assignment" if options.trivial else "hull")
+           "trivial assignment" if options.trivial else
+           "hull, released notebooks" if options.released else "hull")
 
 
 def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
