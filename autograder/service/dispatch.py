@@ -54,7 +54,8 @@ from autograder.runners.backends import load_dask_backend
 from autograder.service import jobqueue
 from autograder.service.course import load_course
 from autograder.service.db import make_engine, sessions
-from autograder.service.graders import OVERRUN_FACTOR, OVERRUN_SLACK, engine_error, load_submission
+from autograder.service.graders import (OVERRUN_FACTOR, OVERRUN_SLACK, engine_error, idle,
+                                        load_submission)
 from autograder.service.models import Submission
 from autograder.service.settings import GraderSettings
 from autograder.service.storage import Storage
@@ -155,8 +156,9 @@ class Dispatcher:
         self._lone: Any = None  # the suspect out alone, if one is
         self._checked = time.monotonic()
 
-    def run(self, stop: Any, parent: int) -> None:
-        """Dispatch until ``stop`` is set or the service is gone; then wait briefly for what is out."""
+    def run(self, stop: Any, parent: int, wake: Any = None) -> None:
+        """Dispatch until ``stop`` is set or the service is gone; then wait briefly for what is out.
+        ``wake``: see :func:`autograder.service.graders.idle`."""
         self.leases.start()
         try:
             self._warm_up()
@@ -169,7 +171,7 @@ class Dispatcher:
                 if self.out:
                     self._collect(self.settings.poll_seconds)
                 else:
-                    stop.wait(self.settings.poll_seconds)
+                    idle(stop, wake, self.settings.poll_seconds)
             deadline = time.monotonic() + DRAIN_SECONDS
             while self.out and time.monotonic() < deadline and os.getppid() == parent:
                 # what is left, and a suspect not sent again, keeps no lease and is graded again later
@@ -353,6 +355,7 @@ class Dispatcher:
         self.leases.release(flight.job)
 
 
-def dispatcher_main(settings: GraderSettings, stop: Any, name: str, parent: int) -> None:
+def dispatcher_main(settings: GraderSettings, stop: Any, name: str, parent: int,
+                    wake: Any = None) -> None:
     """The loop of the dispatcher process (started through :func:`autograder.service.pool.grader_entry`)."""
-    Dispatcher(settings, name).run(stop, parent)
+    Dispatcher(settings, name).run(stop, parent, wake)

@@ -162,11 +162,14 @@ def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: GraderSettings,
             return
 
 
-def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int) -> None:
+def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int,
+                wake: Any = None) -> None:
     """The loop of one grading process: claim, grade, record, until ``stop`` is set.
 
     Started through :func:`autograder.service.pool.grader_entry`, which has already
-    tied this process's life to the service's (``parent``).
+    tied this process's life to the service's (``parent``). With nothing to claim it
+    waits ``settings.poll_seconds``, or until ``wake`` (an event the service sets when
+    it queues a job) is set.
     """
     course = load_course(settings.course_path)
     engine = make_engine(settings.database_url)
@@ -177,7 +180,7 @@ def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int) -> 
         while not stop.is_set() and os.getppid() == parent:
             job = jobqueue.claim(factory, lease_seconds=settings.lease_seconds)
             if job is None:
-                stop.wait(settings.poll_seconds)
+                idle(stop, wake, settings.poll_seconds)
                 continue
             submission = load_submission(factory, job)
             halt = threading.Event()
@@ -195,3 +198,13 @@ def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int) -> 
     finally:
         graders.close()
         engine.dispose()
+
+
+def idle(stop: Any, wake: Any, seconds: float) -> None:
+    """Wait ``seconds`` for work; less when ``wake`` is set (a job was queued) or, without
+    one, when ``stop`` is. Every idle process wakes, and the claim decides who grades."""
+    if wake is None:
+        stop.wait(seconds)
+        return
+    if wake.wait(seconds):
+        wake.clear()  # a set after this clear is not lost: the loop claims next

@@ -7,6 +7,10 @@ SQLite, where the statement holds the write lock, and the same with
 or take the same row. The grader renews its lease while it works. Finishing
 is one transaction guarded by the claim token: a grader whose lease was taken
 over cannot commit, and the ``gradings`` ledger has one row per job at most.
+
+Idle graders look for work every ``poll_seconds``; a job queued by this process
+also wakes them at once (:func:`wake_on_enqueue`, set by ``autograder serve`` to its
+grading processes' event), once its transaction has committed.
 """
 
 from __future__ import annotations
@@ -14,9 +18,10 @@ from __future__ import annotations
 import datetime as dt
 import json
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass
 
-from sqlalchemy import select, text, update
+from sqlalchemy import event, select, text, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from autograder.results.model import SubmissionResult
@@ -115,8 +120,33 @@ def finish(factory: sessionmaker[Session], job: Claimed, result: SubmissionResul
         return "done"
 
 
+#: called once a transaction that queued a job has committed (see wake_on_enqueue)
+_WAKE: list[Callable[[], None]] = []
+
+
+def wake_on_enqueue(wake: Callable[[], None] | None) -> None:
+    """Call ``wake`` (None: nothing) after every commit that queued a job in this process."""
+    _WAKE[:] = [wake] if wake is not None else []
+
+
 def enqueue(session: Session, submission_id: int, *, kind: str = "grade") -> Job:
     job = Job(submission_id=submission_id, kind=kind, priority=0 if kind == "grade" else 1,
               state="queued", tries=0, error="")
     session.add(job)
+    if _WAKE:
+        if "queued" not in session.info:  # once per session: its commits and rollbacks
+            event.listen(session, "after_commit", _wake_graders)
+            event.listen(session, "after_rollback", _forget_queued)
+        session.info["queued"] = True
     return job
+
+
+def _wake_graders(session: Session) -> None:
+    if session.info.get("queued"):
+        session.info["queued"] = False
+        for wake in _WAKE:
+            wake()
+
+
+def _forget_queued(session: Session) -> None:
+    session.info["queued"] = False

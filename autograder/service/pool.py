@@ -39,9 +39,11 @@ def _watch(parent: int) -> None:
     os._exit(1)  # the warm workers die with us (their own PR_SET_PDEATHSIG)
 
 
-def grader_entry(settings: GraderSettings, stop: Any, name: str, parent: int) -> None:
+def grader_entry(settings: GraderSettings, stop: Any, name: str, parent: int,
+                 wake: Any = None) -> None:
     """The target of a grading process: tie it to ``parent``, then run the grading loop
-    (or, with ``settings.dask``, the dispatcher's: :mod:`autograder.service.dispatch`)."""
+    (or, with ``settings.dask``, the dispatcher's: :mod:`autograder.service.dispatch`).
+    ``wake`` is set when a job was queued (the loop then looks at once)."""
     _ask_kernel_to_kill_us()
     if os.getppid() != parent:  # the service died while this process was starting
         os._exit(1)
@@ -50,11 +52,11 @@ def grader_entry(settings: GraderSettings, stop: Any, name: str, parent: int) ->
     if settings.dask is not None:
         from autograder.service.dispatch import dispatcher_main
 
-        dispatcher_main(settings, stop, name, parent)
+        dispatcher_main(settings, stop, name, parent, wake)
         return
     from autograder.service.graders import grader_main
 
-    grader_main(settings, stop, name, parent)
+    grader_main(settings, stop, name, parent, wake)
 
 
 class GradingPool:
@@ -68,6 +70,8 @@ class GradingPool:
         self.jobs = jobs
         self._context = multiprocessing.get_context("spawn")
         self._stop = self._context.Event()
+        #: set when a job is queued: idle grading processes look at once (see wake)
+        self._wake = self._context.Event()
         self._procs: list[Any] = []
         self._closing = threading.Event()
 
@@ -81,9 +85,13 @@ class GradingPool:
         # process may not; stop() ends it either way, and the kernel does if the service dies.
         proc = self._context.Process(
             target=grader_entry, name=f"grader-{index}", daemon=self.settings.dask is None,
-            args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid()))
+            args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid(), self._wake))
         proc.start()
         return proc
+
+    def wake(self) -> None:
+        """A job was queued: idle grading processes look now rather than at their next poll."""
+        self._wake.set()
 
     def _restart_dead(self) -> None:
         """A grading process that died (out of memory, say) is replaced."""
@@ -95,6 +103,7 @@ class GradingPool:
     def stop(self, timeout: float = 30.0) -> None:
         self._closing.set()
         self._stop.set()
+        self._wake.set()
         deadline = time.monotonic() + timeout
         for proc in self._procs:
             proc.join(max(0.1, deadline - time.monotonic()))

@@ -15,7 +15,7 @@ from autograder.errors import UsageError
 from autograder.results.files import atomic_write_bytes
 from autograder.runners.backends import load_dask_backend
 from autograder.runners.jobs import DaskSpec
-from autograder.service import auth
+from autograder.service import auth, jobqueue
 from autograder.service.course import Course, load_course
 from autograder.service.db import make_engine, sessions, upgrade
 from autograder.service.lti.outbox import ScoreSender
@@ -131,6 +131,7 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
                               dask=spec, **({"lease_seconds": lease_seconds} if lease_seconds else {}))
     pool = GradingPool(settings, 1 if spec is not None else jobs or max(1, (os.cpu_count() or 2)))
     pool.start()
+    jobqueue.wake_on_enqueue(pool.wake)  # uploads and regrades wake idle graders at once
     scores = ScoreSender(course, factory)  # LTI: scores to the LMS, pending ones first
     scores.start()
     if say:
@@ -143,5 +144,6 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
                     log_level="warning", access_log=False)
     finally:
         scores.stop()
+        jobqueue.wake_on_enqueue(None)
         pool.stop()
         engine.dispose()
