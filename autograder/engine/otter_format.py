@@ -134,12 +134,31 @@ def _is_marker(cell: Any) -> bool:
 
 
 def is_otter_notebook(path: Path) -> bool:
-    """True when ``path`` is a notebook with otter's ASSIGNMENT CONFIG or BEGIN QUESTION cells."""
+    """True when ``path`` is a notebook with otter's ASSIGNMENT CONFIG or BEGIN QUESTION cells.
+
+    Kept per file while its size and modification time stay the same: every load of an
+    assignment asks (a grading process loads its assignment for every job), and reading
+    a notebook with nbformat costs about 3 ms.
+    """
     try:
-        nb = nbformat.read(str(path), as_version=4)
-    except Exception:  # nbformat raises many types; the nbgrader reader reports the damage
+        stat = path.stat()
+    except OSError:
         return False
-    return any(_is_marker(cell) for cell in nb.cells)
+    key = (str(path), stat.st_mtime_ns, stat.st_size)
+    known = _OTTER_FILES.get(key)
+    if known is None:
+        try:
+            nb = nbformat.read(str(path), as_version=4)
+        except Exception:  # nbformat raises many types; the nbgrader reader reports the damage
+            return False
+        known = _OTTER_FILES[key] = any(_is_marker(cell) for cell in nb.cells)
+        if len(_OTTER_FILES) > 256:  # a long-lived process that saw many notebooks
+            _OTTER_FILES.pop(next(iter(_OTTER_FILES)))
+    return known
+
+
+#: (path, mtime in ns, size) -> whether it is an otter master notebook
+_OTTER_FILES: dict[tuple[str, int, int], bool] = {}
 
 
 def read_otter(path: Path) -> OtterNotebook:
