@@ -79,12 +79,15 @@ def upload_and_wait(url: str, token: str, data: bytes) -> float:
         answer.raise_for_status()
         sub_id = answer.json()["id"]
         while True:
-            view = client.get(f"{url}/api/submissions/{sub_id}").json()
+            # as `autograder submit` asks: the answer comes once graded (a service without
+            # ?wait answers at once, and is asked again every 20 ms)
+            asked = time.perf_counter()
+            view = client.get(f"{url}/api/submissions/{sub_id}", params={"wait": 30}).json()
             if view["status"] not in ("queued", "running"):
                 if view["status"] != "graded":
                     raise RuntimeError(f"submission {sub_id} ended {view['status']}")
                 return time.perf_counter() - start
-            time.sleep(0.02)
+            time.sleep(max(0.0, 0.02 - (time.perf_counter() - asked)))
 
 
 def main() -> None:
@@ -224,7 +227,8 @@ def report(args: argparse.Namespace, one: list[float], many: list[float], accept
 
 def _wait_owner(url: str, headers: dict[str, str], sub_id: int) -> None:
     with httpx.Client(timeout=600, headers=headers) as client:
-        while client.get(f"{url}/api/submissions/{sub_id}").json()["status"] in ("queued", "running"):
+        while client.get(f"{url}/api/submissions/{sub_id}",
+                         params={"wait": 30}).json()["status"] in ("queued", "running"):
             time.sleep(0.1)
 
 

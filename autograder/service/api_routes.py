@@ -1,4 +1,5 @@
-"""The JSON API of ``autograder submit`` and the live status page: an attempt as JSON.
+"""The JSON API of ``autograder submit`` and the live status page: an attempt as JSON
+(``?wait=S``: once it is graded, see :mod:`autograder.service.waits`).
 
 Uploads go through the student pages' form route
 (:func:`autograder.service.pages_student.submit`), which answers with
@@ -7,15 +8,19 @@ Uploads go through the student pages' form route
 
 from __future__ import annotations
 
-from typing import Any
+import asyncio
+import time
+from typing import Annotated, Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Query
 from fastapi.responses import JSONResponse, Response
+from starlette.concurrency import run_in_threadpool
 
 from autograder.service import rubrics
 from autograder.service.models import Submission
 from autograder.service.standing import final_score
-from autograder.service.web import MySubmission, ServiceState
+from autograder.service.waits import MAX_WAIT, RECHECK
+from autograder.service.web import MySubmission, Service, ServiceState
 
 router = APIRouter()
 
@@ -38,7 +43,31 @@ def submission_view(sub: Submission, raw: float | None = None) -> dict[str, Any]
 
 
 @router.get("/api/submissions/{sub_id}")
-def submission_api(mine: MySubmission, svc: ServiceState) -> Response:
+async def submission_api(mine: MySubmission, svc: ServiceState,
+                         wait: Annotated[float, Query(ge=0, le=MAX_WAIT, allow_inf_nan=False)] = 0.0
+                         ) -> Response:
+    """The attempt as JSON; with ``wait`` (seconds), once it is graded or failed, or when
+    ``wait`` has passed (see :mod:`autograder.service.waits`)."""
+    sub = mine.sub
+    deadline = time.monotonic() + wait
+    while sub.status in ("queued", "running") and (left := deadline - time.monotonic()) > 0:
+        if svc.waits is not None:
+            await svc.waits.wait(sub.id, min(left, RECHECK))
+        else:  # no grading processes of ours to tell us: look again now and then
+            await asyncio.sleep(min(left, RECHECK / 4))
+        sub = await run_in_threadpool(_reload, svc, sub.id)
+    return JSONResponse(await run_in_threadpool(_view, svc, sub))
+
+
+def _reload(svc: Service, sub_id: int) -> Submission:
     with svc.factory() as session:
-        raw = rubrics.load(session, [mine.sub]).raw_score(mine.sub)
-    return JSONResponse(submission_view(mine.sub, raw))
+        sub = session.get(Submission, sub_id)
+        assert sub is not None  # submissions are never deleted
+        session.expunge(sub)
+    return sub
+
+
+def _view(svc: Service, sub: Submission) -> dict[str, Any]:
+    with svc.factory() as session:
+        raw = rubrics.load(session, [sub]).raw_score(sub)
+    return submission_view(sub, raw)

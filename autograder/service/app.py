@@ -35,16 +35,18 @@ from autograder.service.bounds import BodyLimit
 from autograder.service.course import Course
 from autograder.service.lti import routes as lti
 from autograder.service.storage import Storage
+from autograder.service.waits import Waits
 from autograder.service.web import HERE, NeedSignIn, Service, http_error, need_sign_in, security_headers
 
 
-def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes | None = None
-               ) -> FastAPI:
-    """The ASGI application for ``course`` over the database behind ``factory``."""
+def create_app(course: Course, factory: sessionmaker[Session], *, secret: bytes | None = None,
+               waits: Waits | None = None) -> FastAPI:
+    """The ASGI application for ``course`` over the database behind ``factory``; ``waits``
+    is woken by the service's grading processes (see :mod:`autograder.service.waits`)."""
     app = FastAPI(title=f"numgrade: {course.name}", docs_url=None, redoc_url=None, openapi_url=None)
     app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
     app.state.service = Service(course, factory, Storage(course.data_dir),
-                                secret or secrets.token_bytes(32))
+                                secret or secrets.token_bytes(32), waits)
     # the innermost middleware, so the routes' parsers read the body through it directly and
     # its 413 reaches the routes' handlers as it is (not wrapped by another middleware's task group)
     app.add_middleware(BodyLimit, max_upload_bytes=course.max_upload_bytes)

@@ -55,7 +55,7 @@ from autograder.service import jobqueue
 from autograder.service.course import load_course
 from autograder.service.db import make_engine, sessions
 from autograder.service.graders import (OVERRUN_FACTOR, OVERRUN_SLACK, engine_error, idle,
-                                        load_submission)
+                                        load_submission, tell_graded)
 from autograder.service.models import Submission
 from autograder.service.settings import GraderSettings
 from autograder.service.storage import Storage
@@ -154,6 +154,8 @@ class Dispatcher:
         self.out: dict[Any, _Flight] = {}
         self._suspects: deque[_Flight] = deque()  # lost their workers beside others: go again alone
         self._lone: Any = None  # the suspect out alone, if one is
+        #: where the ids of recorded submissions go (see autograder.service.waits)
+        self.graded: Any = None
         self._checked = time.monotonic()
 
     def run(self, stop: Any, parent: int, wake: Any = None) -> None:
@@ -353,9 +355,12 @@ class Dispatcher:
         jobqueue.finish(self.factory, flight.job, result, str(folder.relative_to(self.storage.root)),
                         worker=f"{self.name} (dask)", max_tries=self.course.max_tries)
         self.leases.release(flight.job)
+        tell_graded(self.graded, flight.job.submission_id)
 
 
 def dispatcher_main(settings: GraderSettings, stop: Any, name: str, parent: int,
-                    wake: Any = None) -> None:
+                    wake: Any = None, graded: Any = None) -> None:
     """The loop of the dispatcher process (started through :func:`autograder.service.pool.grader_entry`)."""
-    Dispatcher(settings, name).run(stop, parent, wake)
+    dispatcher = Dispatcher(settings, name)
+    dispatcher.graded = graded
+    dispatcher.run(stop, parent, wake)

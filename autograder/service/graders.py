@@ -163,13 +163,14 @@ def _keep_lease(factory: Any, job: jobqueue.Claimed, settings: GraderSettings,
 
 
 def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int,
-                wake: Any = None) -> None:
+                wake: Any = None, graded: Any = None) -> None:
     """The loop of one grading process: claim, grade, record, until ``stop`` is set.
 
     Started through :func:`autograder.service.pool.grader_entry`, which has already
     tied this process's life to the service's (``parent``). With nothing to claim it
     waits ``settings.poll_seconds``, or until ``wake`` (an event the service sets when
-    it queues a job) is set.
+    it queues a job) is set. The id of each submission recorded goes on ``graded`` (a
+    queue the web process reads to answer the requests waiting for it).
     """
     course = load_course(settings.course_path)
     engine = make_engine(settings.database_url)
@@ -195,6 +196,7 @@ def grader_main(settings: GraderSettings, stop: Any, name: str, parent: int,
                 halt.set()
                 keeper.join()
             jobqueue.finish(factory, job, result, folder, worker=name, max_tries=course.max_tries)
+            tell_graded(graded, job.submission_id)
     finally:
         graders.close()
         engine.dispose()
@@ -208,3 +210,12 @@ def idle(stop: Any, wake: Any, seconds: float) -> None:
         return
     if wake.wait(seconds):
         wake.clear()  # a set after this clear is not lost: the loop claims next
+
+
+def tell_graded(graded: Any, sub_id: int) -> None:
+    """Put ``sub_id`` on ``graded`` (None: nobody listens); never blocks, never raises."""
+    if graded is not None:
+        try:
+            graded.put_nowait(sub_id)
+        except Exception:  # full or closed: the waiting requests look again within a second
+            pass

@@ -40,10 +40,11 @@ def _watch(parent: int) -> None:
 
 
 def grader_entry(settings: GraderSettings, stop: Any, name: str, parent: int,
-                 wake: Any = None) -> None:
+                 wake: Any = None, graded: Any = None) -> None:
     """The target of a grading process: tie it to ``parent``, then run the grading loop
     (or, with ``settings.dask``, the dispatcher's: :mod:`autograder.service.dispatch`).
-    ``wake`` is set when a job was queued (the loop then looks at once)."""
+    ``wake`` is set when a job was queued (the loop then looks at once); the id of every
+    submission recorded goes on ``graded`` (see :mod:`autograder.service.waits`)."""
     _ask_kernel_to_kill_us()
     if os.getppid() != parent:  # the service died while this process was starting
         os._exit(1)
@@ -52,11 +53,11 @@ def grader_entry(settings: GraderSettings, stop: Any, name: str, parent: int,
     if settings.dask is not None:
         from autograder.service.dispatch import dispatcher_main
 
-        dispatcher_main(settings, stop, name, parent, wake)
+        dispatcher_main(settings, stop, name, parent, wake, graded)
         return
     from autograder.service.graders import grader_main
 
-    grader_main(settings, stop, name, parent, wake)
+    grader_main(settings, stop, name, parent, wake, graded)
 
 
 class GradingPool:
@@ -72,6 +73,9 @@ class GradingPool:
         self._stop = self._context.Event()
         #: set when a job is queued: idle grading processes look at once (see wake)
         self._wake = self._context.Event()
+        #: ids of the submissions the processes recorded, for the web process's waiting
+        #: requests (a put never blocks: the queue's own thread writes the pipe)
+        self.graded = self._context.Queue()
         self._procs: list[Any] = []
         self._closing = threading.Event()
 
@@ -85,7 +89,8 @@ class GradingPool:
         # process may not; stop() ends it either way, and the kernel does if the service dies.
         proc = self._context.Process(
             target=grader_entry, name=f"grader-{index}", daemon=self.settings.dask is None,
-            args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid(), self._wake))
+            args=(self.settings, self._stop, f"{os.getpid()}-{index}", os.getpid(), self._wake,
+                  self.graded))
         proc.start()
         return proc
 
@@ -110,3 +115,4 @@ class GradingPool:
             if proc.is_alive():
                 proc.kill()
                 proc.join(5)
+        self.graded.put(None)  # ends the web process's relay thread

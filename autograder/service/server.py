@@ -22,6 +22,7 @@ from autograder.service.lti.outbox import ScoreSender
 from autograder.service.models import User
 from autograder.service.pool import GradingPool
 from autograder.service.settings import GraderSettings
+from autograder.service.waits import Waits
 
 
 def open_course(course_path: str | Path, *, database: str | None = None) -> Course:
@@ -132,6 +133,8 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
     pool = GradingPool(settings, 1 if spec is not None else jobs or max(1, (os.cpu_count() or 2)))
     pool.start()
     jobqueue.wake_on_enqueue(pool.wake)  # uploads and regrades wake idle graders at once
+    waits = Waits()
+    waits.relay(pool.graded)  # and a grade recorded answers the requests waiting for it
     scores = ScoreSender(course, factory)  # LTI: scores to the LMS, pending ones first
     scores.start()
     if say:
@@ -140,8 +143,8 @@ def serve(course_path: str | Path, *, host: str = "127.0.0.1", port: int = 8000,
         print(f"Serving {course.name} on http://{host}:{port}/ with {graders}; "
               f"database {engine.url.render_as_string(hide_password=True)}.", flush=True)
     try:
-        uvicorn.run(create_app(course, factory, secret=_secret(course)), host=host, port=port,
-                    log_level="warning", access_log=False)
+        uvicorn.run(create_app(course, factory, secret=_secret(course), waits=waits), host=host,
+                    port=port, log_level="warning", access_log=False)
     finally:
         scores.stop()
         jobqueue.wake_on_enqueue(None)

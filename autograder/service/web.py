@@ -37,6 +37,7 @@ from autograder.service.bounds import RequestTooLarge
 from autograder.service.course import AssignmentPolicy, Course
 from autograder.service.models import Submission, User, utcnow
 from autograder.service.storage import Storage
+from autograder.service.waits import Waits
 
 HERE = Path(__file__).resolve().parent
 SESSION_COOKIE = "ag_session"
@@ -75,8 +76,10 @@ class Service:
     """The state the routes share (immutable after start-up)."""
 
     def __init__(self, course: Course, factory: sessionmaker[Session], storage: Storage,
-                 secret: bytes) -> None:
+                 secret: bytes, waits: Waits | None = None) -> None:
         self.course, self.factory, self.storage, self.secret = course, factory, storage, secret
+        #: requests waiting for a grade, woken by the grading processes (None: none of ours)
+        self.waits = waits
 
     def page(self, name: str, who: Who | None, status: int = 200, **context: Any) -> HTMLResponse:
         html = _templates().get_template(name).render(

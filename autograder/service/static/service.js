@@ -15,10 +15,12 @@
       if (view.feedback_url) document.getElementById("feedback-link").hidden = false;
       return view.status === "queued" || view.status === "running";
     };
+    // ?wait=20: the service answers once the attempt is graded (or after 20 s)
     const poll = () => {
-      fetch(url, {headers: {"Accept": "application/json"}, credentials: "same-origin"})
+      const asked = Date.now();
+      fetch(url + "?wait=20", {headers: {"Accept": "application/json"}, credentials: "same-origin"})
         .then((r) => r.json())
-        .then((view) => { if (show(view)) setTimeout(poll, 700); })
+        .then((view) => { if (show(view)) setTimeout(poll, Math.max(0, 700 - (Date.now() - asked))); })
         .catch(() => setTimeout(poll, 2000));
     };
     if (["queued", "running"].includes(document.getElementById("status").textContent)) poll();
