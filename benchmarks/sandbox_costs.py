@@ -11,7 +11,9 @@ time and its exit, from ``RUSAGE_CHILDREN``) of
 * a bare fork (the peer: the child exits at once);
 * the whole sandbox (:func:`autograder.sandbox.confine.enter_sandbox` with the default
   policy), first with a network namespace made by each child, then as the worker
-  runs it (one empty namespace made once by the parent, as root), then with one part
+  runs it (one empty namespace made once by the parent, as root, and the child born
+  as the first process of its own PID namespace), then with the relay process a
+  child forks where its parent cannot make that namespace for it, then with one part
   turned off by policy at a time, so that each part's cost is the difference from
   the whole (without the network namespace, a child of that parent goes back to the
   host's);
@@ -64,12 +66,13 @@ def _busy_ticks() -> int:
     return sum(values) - values[3] - values[4]  # minus idle and iowait
 
 
-def children(count: int, work: Path, body: Callable[[Path], object]) -> tuple[float, float]:
+def children(count: int, work: Path, body: Callable[[Path], object],
+             fork: Callable[[], int] = os.fork) -> tuple[float, float]:
     """CPU ms per child (its own, with its exit) and the machine's busy ms per child."""
     before, ticks = os.times(), _busy_ticks()
     for _ in range(count):
         workdir = Path(tempfile.mkdtemp(dir=work))
-        pid = os.fork()
+        pid = fork()
         if pid == 0:
             try:
                 body(workdir)
@@ -115,7 +118,8 @@ def measure(count: int, root: Path) -> int:
     bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
 
-    def line(label: str, policy: IsolationPolicy, *, with_cell: bool = False) -> None:
+    def line(label: str, policy: IsolationPolicy, *, with_cell: bool = False,
+             relay: bool = False) -> None:
         probe = Path(tempfile.mkdtemp(dir=work))
         readable.coverable_folders(exclude, probe, policy)
         confine.prepare_cgroup(policy, 0)
@@ -134,7 +138,9 @@ def measure(count: int, root: Path) -> int:
         if with_cell:
             bodies.append(("whole sandbox and one IPython cell", enter_and_run))
         for name, body in bodies:
-            cpu, busy = children(count, work, body)
+            # as the worker forks (confine.fork_child), or with the PID namespace's relay
+            fork = os.fork if relay else lambda: confine.fork_child(policy)
+            cpu, busy = children(count, work, body, fork)
             print(f"  {name:<36} {cpu:7.2f} {busy:7.2f} {cpu / bare:9.1f}x", flush=True)
         shared.close()
 
@@ -142,9 +148,10 @@ def measure(count: int, root: Path) -> int:
     line("whole, a network namespace per child", whole)
     confine.prepare_network(whole)  # once, as the worker does: the children share it
     line("whole sandbox", whole, with_cell=True)
+    line("  with a relay for the PID namespace", whole, relay=True)
     for part, setting in (("namespaces", "namespaces"), ("network namespace", "network_namespace"),
                           ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),
-                          ("user switch", "drop_user")):
+                          ("user switch", "drop_user"), ("pid namespace", "pid_namespace")):
         line(f"  without {part}", dataclasses.replace(whole, **{setting: False}))
     return 0
 

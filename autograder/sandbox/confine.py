@@ -55,14 +55,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from autograder.errors import UsageError
-from autograder.sandbox import cgroups, kernel, seccomp
+from autograder.sandbox import cgroups, kernel, pidns, seccomp
 from autograder.sandbox.environment import clean_environment, replace_environment
 from autograder.sandbox.landlock import (SharedLandlock, allow_own_proc, prepare_landlock, restrict,
                                          write_layer)
 from autograder.sandbox.policy import IsolationPolicy, Limits
 from autograder.sandbox.readable import coverable_folders
 
-__all__ = ["enter_sandbox", "prepare_cgroup", "prepare_network"]
+__all__ = ["enter_sandbox", "fork_child", "prepare_cgroup", "prepare_network"]
 
 # <linux/prctl.h>: keep the permitted capabilities when setresuid() leaves uid 0.
 PR_SET_KEEPCAPS = 8
@@ -83,6 +83,17 @@ MAX_UID = 2**32 - 1
 
 
 # --------------------------------------------------------------------------- entry
+
+
+def fork_child(policy: IsolationPolicy) -> int:
+    """``os.fork()`` the child that will call :func:`enter_sandbox` with ``policy``.
+
+    As root, with a PID namespace in the policy, the child is born as the first
+    process of a namespace of its own, so that it needs no relay process (see
+    :mod:`autograder.sandbox.pidns`); otherwise a plain fork.
+    """
+    return pidns.fork(new_namespace=policy.namespaces and policy.pid_namespace
+                      and os.geteuid() == 0)
 
 
 def enter_sandbox(

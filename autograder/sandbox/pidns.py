@@ -8,8 +8,12 @@ mount namespace to show that namespace only, and no process outside it has a
 number the student can name.
 
 ``unshare(CLONE_NEWPID)`` moves only the caller's *future* children into the new
-namespace, so the child forks once more (:func:`split_off_init`): the process the
-grader forked stays outside as a small relay that closes every descriptor, waits
+namespace. As root, the warm parent makes the namespace just before it forks
+(:func:`fork`): the child is born as its first process and goes on into the sandbox,
+and the parent's later children are born in its own namespace again. Otherwise (an
+ordinary user gets the capability only inside the child's user namespace) the child
+forks once more (:func:`split_off_init`): the process the grader forked stays outside
+as a small relay that closes every descriptor, waits
 for the namespace's first process and exits with its status; the first process
 returns and goes on into the sandbox. The relay keeps the grader's view whole: it
 is the process the grader holds a pidfd of, its session and process group hold
@@ -31,7 +35,7 @@ import signal
 
 from autograder.sandbox import kernel
 
-__all__ = ["CLONE_NEWPID", "OFF", "mount_proc", "split_off_init"]
+__all__ = ["CLONE_NEWPID", "OFF", "born_as_init", "fork", "mount_proc", "split_off_init"]
 
 # <sched.h>
 CLONE_NEWPID = 0x20000000
@@ -44,6 +48,56 @@ OFF = ("other processes (the grader's command line, other submissions' workers) 
        "visible to the submission")
 #: exit status of a relay that lost its child without a status to pass on
 LOST = 70
+
+
+def fork(*, new_namespace: bool) -> int:
+    """``os.fork()``; with ``new_namespace``, the child is process 1 of a PID namespace of its own.
+
+    The namespace is made in the caller just before the fork and the caller's next
+    children are born in its own namespace again, so the child needs no relay
+    (:func:`split_off_init`): one fork, one exit and one process fewer per child
+    (``benchmarks/sandbox_costs.py``). Needs ``CAP_SYS_ADMIN`` (root); where the kernel
+    refuses, the child is forked as usual and makes its namespace itself.
+    """
+    made = new_namespace and _unshare_for_children()
+    try:
+        pid = os.fork()
+    except BaseException:
+        if made:
+            _children_in_own_namespace()
+        raise
+    if pid != 0 and made:
+        _children_in_own_namespace()
+    return pid
+
+
+def born_as_init() -> bool:
+    """Whether this process was born as process 1 of a fresh PID namespace (see :func:`fork`).
+
+    A child forked into its parent's namespace never has pid 1 there.
+    """
+    return os.getpid() == 1
+
+
+def _unshare_for_children() -> bool:
+    try:
+        kernel.unshare(CLONE_NEWPID)
+    except OSError:  # not root, or a container that refuses: the child makes its own
+        return False
+    return True
+
+
+def _children_in_own_namespace() -> None:
+    """The caller's next children are born in its own PID namespace again.
+
+    Without this, the next fork would go into the namespace just made, whose first
+    process is the child; once that child has ended the fork would fail.
+    """
+    fd = os.open("/proc/self/ns/pid", os.O_RDONLY | os.O_CLOEXEC)
+    try:
+        kernel.setns(fd, CLONE_NEWPID)
+    finally:
+        os.close(fd)
 
 
 def split_off_init() -> None:

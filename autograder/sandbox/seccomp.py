@@ -136,8 +136,9 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
         refuses reading them but not ``stat``, so without this a child could
         still learn which files exist there, their sizes and times.
     pid : bool
-        Also a PID namespace, with ``/proc`` remounted for it: the caller forks its
-        first process, and only that one returns (see :mod:`autograder.sandbox.pidns`).
+        Also a PID namespace, with ``/proc`` remounted for it: unless the caller was
+        born as the first process of one (:func:`autograder.sandbox.pidns.fork`), it
+        forks its first process, and only that one returns (see :mod:`autograder.sandbox.pidns`).
 
     Returns
     -------
@@ -157,7 +158,7 @@ def private_namespaces(workdir: Path, *, quota_bytes: int, network: bool = False
             "RLIMIT_FSIZE per file; " + pidns.OFF,))
     notes.insert(0, "namespaces: IPC, UTS, mount" + (", network" if network else "")
                  + (", PID" if pid else "") + ("" if is_root else " (in a user namespace)"))
-    if pid:
+    if pid and not pidns.born_as_init():
         pidns.split_off_init()  # from here on, the namespace's first process
     try:
         _mount_quota(workdir, quota_bytes)
@@ -189,6 +190,9 @@ def _unshare(flags: int, pid: bool, notes: list[str]) -> bool:
     """New namespaces of ``flags`` (in a new user namespace unless root), with a PID
     namespace if ``pid`` and the kernel allows one; True when it did."""
     enter = kernel.unshare if os.geteuid() == 0 else _enter_user_namespace
+    if pid and pidns.born_as_init():  # its warm parent made it (pidns.fork)
+        enter(flags)
+        return True
     if pid:
         try:
             enter(flags | pidns.CLONE_NEWPID)

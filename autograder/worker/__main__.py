@@ -285,7 +285,7 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     # child's full collections then neither walk nor copy on write the parent's
     # objects (a cell that allocates much ran about 3x faster; benchmarks/fork_floor.py).
     gc.freeze()
-    pid = os.fork()
+    pid = confine.fork_child(policy)
     if pid == 0:
         control.close()
         _child(sub, request, shell, shared)

@@ -34,7 +34,7 @@ import pytest
 from autograder.engine.slot import claim_slot
 from autograder.errors import UsageError
 from autograder.sandbox import readable
-from autograder.sandbox.confine import enter_sandbox
+from autograder.sandbox.confine import enter_sandbox, fork_child
 from autograder.sandbox.environment import clean_environment
 from autograder.sandbox.landlock import SharedLandlock, shared_landlock
 from autograder.sandbox.policy import IsolationPolicy, Limits
@@ -93,18 +93,21 @@ def run_sandboxed(
     deadline: float = CHILD_DEADLINE,
     shared: bool = False,
     ruleset: SharedLandlock | None = None,
+    fork: Callable[[], int] = os.fork,
 ) -> Outcome:
     """Fork, enter the sandbox in the child, run ``action`` there, collect the report.
 
     ``shared``: as the warm parent does, build the Landlock ruleset here, before the
     fork, for every working directory in ``workdir``'s parent folder (or pass one
-    built already as ``ruleset``).
+    built already as ``ruleset``). ``fork``: how the child is forked (a plain fork,
+    so that as root the child forks the relay of its PID namespace; or as the warm
+    parent forks, ``confine.fork_child``).
     """
     if shared:  # what the grader guarantees: the work root holds only this child's folder
         assert os.listdir(workdir.parent) == [workdir.name], "a work root holds one folder"
         ruleset = shared_landlock(policy, workdir.parent, exclude)
     read_fd, write_fd = os.pipe()
-    pid = os.fork()
+    pid = fork()
     if pid == 0:  # the child never returns into pytest
         os.close(read_fd)
         _child_main(action, write_fd, policy, workdir, SLOTS[slot], exclude, ruleset)
@@ -623,6 +626,33 @@ def test_cannot_signal_the_grader(
     assert grader_terms == []
 
 
+def test_a_child_forked_as_the_warm_parent_does_is_process_1_of_its_own_namespace(
+        workdir: Path, grader_terms: list[int]) -> None:
+    """As root the warm parent makes the child's PID namespace before the fork (no relay):
+    the child is process 1 and sees no other process, cannot signal the grader, and the
+    parent's next children are born in its own namespace again, so forking goes on."""
+    require_policy(DEFAULT)
+    own = os.readlink("/proc/self/ns/pid")
+    grader = os.getpid()
+
+    def look() -> list[Any]:
+        try:
+            os.kill(grader, signal.SIGTERM)
+        except ProcessLookupError:
+            refused = True
+        else:
+            refused = False
+        return [os.getpid(), sorted(p for p in os.listdir("/proc") if p.isdigit()), refused]
+
+    for _ in range(3):  # a later fork would fail if the parent stayed in the last namespace
+        outcome = run_sandboxed(look, workdir, fork=lambda: fork_child(DEFAULT))
+        assert outcome.value == [1, ["1"], True]
+        assert any(n.startswith("PID namespace:") for n in outcome.report["notes"])
+        assert os.readlink("/proc/self/ns/pid_for_children") == own
+    time.sleep(0.05)
+    assert grader_terms == []
+
+
 # ---------------------------------------------------------------------- limits
 
 
@@ -725,7 +755,7 @@ def test_inherited_environment_block_is_wiped(workdir: Path) -> None:
     script = textwrap.dedent(f"""
         import json, sys
         from pathlib import Path
-        from autograder.sandbox.confine import enter_sandbox
+        from autograder.sandbox.confine import enter_sandbox, fork_child
         from autograder.sandbox.policy import IsolationPolicy
         proc = Path("/proc/self/environ")
         before = "{SECRET}" in proc.read_text("latin-1")
