@@ -21,8 +21,9 @@ ruleset in :mod:`autograder.sandbox.landlock` (the warm parent builds it once, s
 :func:`autograder.sandbox.landlock.shared_landlock`). Steps of
 :mod:`autograder.sandbox.seccomp` come in between: right after the new session,
 private IPC, UTS, mount and PID namespaces (as an ordinary user inside a user
-namespace; the PID namespace needs one more fork, after which only the namespace's
-first process goes on, see :mod:`autograder.sandbox.pidns`) with a size-limited
+namespace; as root the child is born as the PID namespace's first process
+(:func:`fork_child`), otherwise that namespace needs one more fork, after which only
+its first process goes on, see :mod:`autograder.sandbox.pidns`) with a size-limited
 tmpfs over the working directory and ``/proc`` remounted; just before Landlock, a
 seccomp filter (no new socket of any family, no keyrings, memfd or io_uring; no
 System V IPC where there is no IPC namespace).
