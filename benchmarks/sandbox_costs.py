@@ -50,6 +50,8 @@ import numpy  # noqa: E402,F401
 import scipy.interpolate  # noqa: E402,F401
 import scipy.spatial  # noqa: E402,F401
 
+from _record import Figure, add_json_option, record  # noqa: E402
+
 from autograder.sandbox import confine, landlock, readable  # noqa: E402
 from autograder.sandbox.policy import IsolationPolicy  # noqa: E402
 
@@ -94,13 +96,18 @@ def children(count: int, work: Path, body: Callable[[Path], object],
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=200, help="children per line (default 200)")
+    add_json_option(parser, "sandbox_costs")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="sandbox-costs-") as scratch:
-        return measure(args.count, Path(scratch))
+        figures = measure(args.count, Path(scratch))
+    record("sandbox_costs", figures, path=args.json,
+           notes=f"uid {os.geteuid()}; {args.count} children per line; CPU ms per child with "
+           "its exit; busy: the whole machine's ms per child, counted until 0.5 s after the last.")
+    return 0
 
 
-def measure(count: int, root: Path) -> int:
-    """Print the table, with the children's folders in ``root``."""
+def measure(count: int, root: Path) -> list[Figure]:
+    """Print the table, with the children's folders in ``root``; return its figures."""
     os.chmod(root, 0o711)
     work = root / "work"
     work.mkdir(mode=0o711)
@@ -117,6 +124,8 @@ def measure(count: int, root: Path) -> int:
     gc.freeze()
     bare, busy = children(count, work, lambda _: None)
     print(f"  {'bare fork (peer)':<36} {bare:7.2f} {busy:7.2f} {1.0:9.1f}x", flush=True)
+    figures = [Figure("bare fork (peer): CPU", bare, "ms"),
+               Figure("bare fork (peer): busy", busy, "ms")]
 
     def line(label: str, policy: IsolationPolicy, *, with_cell: bool = False,
              relay: bool = False) -> None:
@@ -142,6 +151,10 @@ def measure(count: int, root: Path) -> int:
             fork = os.fork if relay else lambda: confine.fork_child(policy)
             cpu, busy = children(count, work, body, fork)
             print(f"  {name:<36} {cpu:7.2f} {busy:7.2f} {cpu / bare:9.1f}x", flush=True)
+            # an indented line is a variant of the whole sandbox
+            shown = f"whole sandbox, {name.strip()}" if name.startswith(" ") else name
+            figures.extend([Figure(f"{shown}: CPU", cpu, "ms", "bare fork", bare),
+                            Figure(f"{shown}: busy", busy, "ms")])
         shared.close()
 
     # Before the parent moves into the slot's empty network namespace, each child makes its own.
@@ -153,7 +166,7 @@ def measure(count: int, root: Path) -> int:
                           ("seccomp", "seccomp"), ("landlock", "landlock"), ("cgroup", "cgroup"),
                           ("user switch", "drop_user"), ("pid namespace", "pid_namespace")):
         line(f"  without {part}", dataclasses.replace(whole, **{setting: False}))
-    return 0
+    return figures
 
 
 if __name__ == "__main__":
