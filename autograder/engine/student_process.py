@@ -217,6 +217,8 @@ class StudentProcess:
     _pidfd: int | None = None
     _sock: socket.socket | None = None
     _workdir: Path | None = None
+    #: the cells of the current run, for the child (see :meth:`_give_cells`)
+    _cells_json: str = ""
     _clock: CpuClock | None = None
     _started_at: float | None = None
     #: this run's hidden test cells not yet given to the worker, in running order
@@ -295,6 +297,7 @@ class StudentProcess:
                     return "crash", current, None
                 if not started:
                     self._set_up(message, notes)
+                    self._give_cells(wall_deadline)
                     started = True
                     continue
                 try:  # from here on the child runs student code: it is held to the protocol
@@ -376,6 +379,16 @@ class StudentProcess:
         raise EngineError(f"the sandboxed worker sent {describe(message)} before starting; "
                           "see the grader's log")
 
+    def _give_cells(self, wall_deadline: float) -> None:
+        """Send the cells to the child, which has entered its sandbox and run nothing yet."""
+        try:
+            self._send({"op": "cells", "cells_json": self._cells_json},
+                       self.notebook_timeout, wall_deadline)
+        except (TimeoutError, OSError) as exc:
+            self._kill()
+            raise EngineError("the sandboxed worker did not take the notebook's cells "
+                              f"({type(exc).__name__}); see the grader's log") from None
+
     def _violated(self, where: str, detail: str) -> None:
         """Stop the child for a protocol violation at ``where`` and remember it."""
         self._kill()
@@ -399,12 +412,14 @@ class StudentProcess:
             "op": "spawn", "workdir": str(self._workdir), "slot": self.slot.slot,
             "policy": _policy_to_wire(self.policy), "forbid": self.forbid,
             "exclude": [str(p) for p in self.exclude],
-            # One string, not a list: a notebook of many tiny cells must not reach the
-            # protocol's item limit (the worker parses it with json.loads).
-            # A hidden test cell goes without its source (null): see _give_source.
-            "cells_json": json.dumps([[i, None if i in self.hidden_sources else s]
-                                      for i, s in self.cells if i not in self.skip]),
         }
+        # Sent to the child itself once it is sandboxed (see _give_cells), never in the
+        # request: the warm parent would keep them in its freed memory, which every
+        # later child of the slot inherits. One string, not a list: a notebook of many
+        # tiny cells must not reach the protocol's item limit. A hidden test cell goes
+        # without its source (null): see _give_source.
+        self._cells_json = json.dumps([[i, None if i in self.hidden_sources else s]
+                                       for i, s in self.cells if i not in self.skip])
         self._pending = [i for i, _ in self.cells if i in self.hidden_sources and i not in self.skip]
         self._before = None
         if self.otter is not None:

@@ -11,6 +11,9 @@ Control messages (JSON frames from :mod:`autograder.boundary.frames`):
 * grader -> parent ``{"op": "spawn", ...}`` followed by one file descriptor
   (the submission's socket, sent with ``SCM_RIGHTS``);
 * parent -> grader ``{"pid": <child pid>}``.
+
+Nothing of a submission passes through this process (see :func:`_cells`): the
+child receives its cells from the grader once it is sandboxed.
 """
 
 from __future__ import annotations
@@ -132,9 +135,8 @@ def _child(sock: socket.socket, request: dict[str, Any], shell: execute.GradingS
         output = execute.capture_output(policy.limits.output_bytes)
         frames.send_message(sock, {"op": "started", "pid": os.getpid(), "notes": list(notes)})
         run = execute.Execution(shell, output)
-        run.run([(int(i), None if s is None else str(s))
-                 for i, s in json.loads(request["cells_json"])],
-                lambda i: _announce(sock, i), lambda i: _hidden_source(sock, i, run, output))
+        run.run(_cells(sock), lambda i: _announce(sock, i),
+                lambda i: _hidden_source(sock, i, run, output))
         frames.send_message(sock, {
             "op": "ready",
             "cells": [o.to_wire() for o in run.outcomes],
@@ -220,6 +222,20 @@ def _unreadable_path() -> tuple[str, str] | None:
         except OSError as exc:
             return path, exc.strerror or str(exc)
     return None
+
+
+def _cells(sock: socket.socket) -> list[tuple[int, str | None]]:
+    """The submission's cells, sent by the grader to this child once it is sandboxed.
+
+    They never pass through the warm parent: what the warm parent decodes stays in
+    its heap after it is freed, and every later child is a copy of that heap, so a
+    submission could read the code of the submissions its slot graded before it.
+    """
+    message = frames.recv_message(sock)
+    if not (isinstance(message, dict) and message.get("op") == "cells"
+            and isinstance(message.get("cells_json"), str)):
+        raise ProtocolError("the grader did not send the cells")
+    return [(int(i), None if s is None else str(s)) for i, s in json.loads(message["cells_json"])]
 
 
 def _announce(sock: socket.socket, index: int) -> None:
