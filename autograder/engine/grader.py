@@ -336,7 +336,8 @@ class Grader:
         several = len(self.assignment.notebooks) > 1
         # -- intake: a notebook, folder or zip -> its files (engine/submission.py), and
         # whether the notebook is this assignment's (engine/identify.py)
-        with tempfile.TemporaryDirectory(prefix="numgrade-submission-") as scratch:
+        with tempfile.TemporaryDirectory(prefix="submission-",
+                                         dir=self._slot.intake_root) as scratch:
             submission = open_submission(Path(path), self.assignment.notebooks,
                                          scratch=Path(scratch))
             files = dict(submission.notebooks)

@@ -129,6 +129,12 @@ class GradingSlot:
         self.work_root = self._home / "work"
         self.work_root.mkdir(mode=0o711)
         os.chmod(self.work_root, 0o711)  # mkdir's mode is masked by the umask
+        #: the grader's own scratch (a submission's files unpacked before grading):
+        #: beside ``work_root``, never in it, so no child's ruleset grants it; private to
+        #: the grader's user, and removed with the slot's folder, by the next grader
+        #: when this one is killed
+        self.intake_root = self._home / "intake"
+        self.intake_root.mkdir(mode=0o700)
         os.chmod(self._home, 0o711)
 
     def start(self, *, wait: bool = True) -> None:

@@ -96,6 +96,10 @@ def test_killed_batch_resumes_and_loses_nothing(tmp_path: Path) -> None:
     # of the submission it was grading) stays, until the next grader finds it unlocked.
     killed = sorted(scratch.glob("autograder-slot-*"))
     assert killed, "the killed run left no slot folder: this test no longer tests its clean-up"
+    # Everything else it had made in the temporary folder (the submission being
+    # unpacked) was inside its slot folder, which the next grader removes.
+    strays = sorted(p.name for p in scratch.iterdir() if not p.name.startswith("autograder-slot"))
+    assert strays == [], f"the killed grader left {strays} that no later grader removes"
     past_grace = time.time() - 2 * GRACE_SECONDS  # as if the kill were long ago
     for folder in killed:
         os.utime(folder / LOCK_NAME, (past_grace, past_grace))
