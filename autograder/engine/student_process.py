@@ -217,8 +217,6 @@ class StudentProcess:
     _pidfd: int | None = None
     _sock: socket.socket | None = None
     _workdir: Path | None = None
-    #: the cells of the current run, for the child (see :meth:`_give_cells`)
-    _cells_json: str = ""
     _clock: CpuClock | None = None
     _started_at: float | None = None
     #: this run's hidden test cells not yet given to the worker, in running order
@@ -380,10 +378,18 @@ class StudentProcess:
                           "see the grader's log")
 
     def _give_cells(self, wall_deadline: float) -> None:
-        """Send the cells to the child, which has entered its sandbox and run nothing yet."""
+        """Send this run's cells to the child, which has entered its sandbox and run
+        nothing yet.
+
+        To the child itself, never in the spawn request: the warm parent would keep them
+        in its freed memory, which every later child of the slot inherits. One string,
+        not a list: a notebook of many tiny cells must not reach the protocol's item
+        limit. A hidden test cell goes without its source (null): see _give_source.
+        """
+        cells = json.dumps([[i, None if i in self.hidden_sources else s]
+                            for i, s in self.cells if i not in self.skip])
         try:
-            self._send({"op": "cells", "cells_json": self._cells_json},
-                       self.notebook_timeout, wall_deadline)
+            self._send({"op": "cells", "cells_json": cells}, self.notebook_timeout, wall_deadline)
         except (TimeoutError, OSError) as exc:
             self._kill()
             raise EngineError("the sandboxed worker did not take the notebook's cells "
@@ -413,13 +419,7 @@ class StudentProcess:
             "policy": _policy_to_wire(self.policy), "forbid": self.forbid,
             "exclude": [str(p) for p in self.exclude],
         }
-        # Sent to the child itself once it is sandboxed (see _give_cells), never in the
-        # request: the warm parent would keep them in its freed memory, which every
-        # later child of the slot inherits. One string, not a list: a notebook of many
-        # tiny cells must not reach the protocol's item limit. A hidden test cell goes
-        # without its source (null): see _give_source.
-        self._cells_json = json.dumps([[i, None if i in self.hidden_sources else s]
-                                       for i, s in self.cells if i not in self.skip])
+        # No cells here: the child gets them once it is sandboxed (_give_cells).
         self._pending = [i for i, _ in self.cells if i in self.hidden_sources and i not in self.skip]
         self._before = None
         if self.otter is not None:
