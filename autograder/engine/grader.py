@@ -11,6 +11,7 @@ import functools
 import hashlib
 import importlib.util
 import os
+import socket
 import stat
 import tempfile
 import time
@@ -260,13 +261,28 @@ class Grader:
         """
         self._slot.start(wait=False)
         try:
-            if self.check_files:
-                self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0,
-                                                  None), assignment_digest(self.assignment))
-            warm_up(self.assignment.rules)  # imports the static scan meanwhile too
+            self.collect()
             self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass
+
+    def collect(self) -> None:
+        """Collect the checks and import the static scan now, without the worker.
+
+        Raises what collecting raises (:meth:`prepare` leaves that to :meth:`grade`).
+        """
+        if self.check_files:
+            self._check_session(self._context(_Unreadable("no submission yet"), (), {}, 0,
+                                              None), assignment_digest(self.assignment))
+        warm_up(self.assignment.rules)
+
+    def warm_copies(self, count: int) -> list[tuple[int, socket.socket]]:
+        """Copies of this grader's warm parent for ``count`` other slots of its batch.
+
+        Call it after :meth:`prepare` and before the first submission; see
+        :meth:`autograder.engine.slot.GradingSlot.warm_copies`.
+        """
+        return self._slot.warm_copies(count)
 
     def check_requirements(self) -> None:
         """Raise :class:`AssignmentError` unless every requirement imports in the worker.
@@ -303,6 +319,11 @@ class Grader:
         checks, self._checks = self._checks, None
         if checks is not None:
             checks.close()
+
+    @property
+    def core(self) -> int | None:
+        """The core this grader's slot runs on (see :mod:`autograder.sandbox.affinity`)."""
+        return self._slot.core
 
     @property
     def check_files(self) -> list[Path]:

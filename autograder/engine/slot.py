@@ -4,12 +4,20 @@ A :class:`GradingSlot` claims a slot number no other grader of this user holds
 (:func:`claim_slot`) and owns one warm parent process (``python -m autograder.worker``)
 that forks a sandboxed child per submission; :mod:`autograder.engine.student_process`
 runs a submission in such a child.
+
+A batch's later slots need not import again: :meth:`GradingSlot.warm_copies` has
+the first slot's warm parent, before its first submission, fork copies of itself
+that this grader adopts as its own children, and another slot takes one over with
+:meth:`GradingSlot.adopt` (``--jobs N``, see :mod:`autograder.runners.local`).
 """
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import os
+import select
+import signal
 import socket
 import stat
 import subprocess
@@ -20,7 +28,8 @@ from typing import Any
 
 from autograder.boundary import frames
 from autograder.errors import AutograderError, ProtocolError
-from autograder.sandbox import affinity
+from autograder.sandbox import affinity, kernel
+from autograder.sandbox.pidfd import pidfd_kill, pidfd_open, pidfds_supported
 from autograder.sandbox.reaper import kill_descendants
 from autograder.sandbox.tempdirs import OwnedFolder
 
@@ -31,6 +40,8 @@ STARTUP_TIMEOUT = 600.0
 #: only root may write, so no other user can plant the folder or its files beforehand
 ROOT_SLOT_LOCKS = Path("/run/autograder-slots")
 MAX_SLOTS = 1000
+_PR_SET_CHILD_SUBREAPER = 36
+_PR_GET_CHILD_SUBREAPER = 37
 
 
 def slot_lock_dir() -> Path:
@@ -103,6 +114,46 @@ def matplotlib_folder() -> Path:
     return folder
 
 
+class _Copy:
+    """A warm parent this slot took over (:meth:`GradingSlot.adopt`): the few calls of
+    :class:`subprocess.Popen` the slot makes, through a pidfd, since the process is
+    another grader process's child (that process reaps it)."""
+
+    stderr = None
+
+    def __init__(self, pid: int, pidfd: int) -> None:
+        self.pid, self._pidfd = pid, pidfd
+        self.returncode: int | None = None
+
+    def poll(self) -> int | None:
+        if self.returncode is None and select.select([self._pidfd], [], [], 0)[0]:
+            self.returncode = -signal.SIGKILL  # its exit status is its parent's to read
+            os.close(self._pidfd)
+        return self.returncode
+
+    def kill(self) -> None:
+        if self.poll() is None:
+            pidfd_kill(self._pidfd)
+
+    def wait(self, timeout: float | None = None) -> int:
+        if self.returncode is None:
+            if not select.select([self._pidfd], [], [], timeout)[0]:
+                raise subprocess.TimeoutExpired(f"warm parent {self.pid}", timeout or 0.0)
+            self.poll()
+        assert self.returncode is not None
+        return self.returncode
+
+
+def _subreaper(on: bool) -> bool:
+    """Set whether this process adopts its descendants' orphans; return what it was."""
+    was = ctypes.c_int(0)
+    kernel.check("prctl", kernel.libc().prctl(ctypes.c_int(_PR_GET_CHILD_SUBREAPER),
+                                              ctypes.byref(was), ctypes.c_ulong(0),
+                                              ctypes.c_ulong(0), ctypes.c_ulong(0)))
+    kernel.prctl(_PR_SET_CHILD_SUBREAPER, int(on))
+    return bool(was.value)
+
+
 class GradingSlot:
     """One warm parent process; forks a sandboxed child per submission."""
 
@@ -116,9 +167,10 @@ class GradingSlot:
             os.close(self._lock)
             raise
         self._python = python
-        self._proc: subprocess.Popen[bytes] | None = None
+        self._proc: subprocess.Popen[bytes] | _Copy | None = None
         self._control: socket.socket | None = None
         self._greeted = False  # the running warm parent said hello: it is ready to fork
+        self._copies: list[int] = []  # warm parents forked for other slots: ours to reap
         # Under ``scratch`` when the caller has a folder that is cleaned up for it (a Dask
         # worker's own directory, which Dask removes even after the worker was killed).
         # Locked while this slot lives: the next slot removes it if this grader is killed.
@@ -207,6 +259,62 @@ class GradingSlot:
                 theirs.close()
         raise AssertionError("unreachable")
 
+    def warm_copies(self, count: int) -> list[tuple[int, socket.socket]]:
+        """Up to ``count`` copies of this slot's warm parent, each with its control socket.
+
+        Only before this slot's first submission (the warm parent refuses after). Each
+        copy is this process's child: it dies with this process, and
+        :meth:`shutdown` kills and reaps it (the slot that adopted it normally ended
+        it before). Fewer copies, or none, when the kernel has no pidfds or a copy
+        fails: the slots left start their own warm parents.
+        """
+        copies: list[tuple[int, socket.socket]] = []
+        if count <= 0 or not pidfds_supported():
+            return copies
+        try:
+            self.start()
+        except (AutograderError, OSError):  # the next spawn reports it; the others start their own
+            return copies
+        was = _subreaper(True)  # the copy is adopted by this process, see worker._clone
+        try:
+            for _ in range(count):
+                ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+                try:
+                    assert self._control is not None
+                    frames.send_message(self._control, {"op": "clone"})
+                    socket.send_fds(self._control, [b"F"], [theirs.fileno()])
+                    answer = frames.recv_message(self._control, timeout=30)
+                except (OSError, EOFError, ProtocolError):
+                    ours.close()
+                    self.close()  # its state is unknown: the next spawn starts another
+                    break
+                finally:
+                    theirs.close()
+                if not isinstance(answer, dict) or not isinstance(answer.get("pid"), int):
+                    ours.close()
+                    break
+                self._copies.append(answer["pid"])
+                copies.append((answer["pid"], ours))
+        finally:
+            if not was:
+                _subreaper(False)
+        return copies
+
+    def adopt(self, pid: int, control: socket.socket) -> bool:
+        """Take over a warm parent another slot's :meth:`warm_copies` made; False if it is gone.
+
+        The next :meth:`start` waits for its hello as for one this slot launched.
+        """
+        pidfd = pidfd_open(pid)
+        if pidfd is None:
+            control.close()
+            return False
+        self.close()
+        self._proc = _Copy(pid, pidfd)
+        affinity.pin_process(pid, self.core)
+        self._control = control
+        return True
+
     @property
     def warm_parent(self) -> int | None:
         """Pid of the running warm parent (the subreaper of every child), if any."""
@@ -229,6 +337,13 @@ class GradingSlot:
 
     def shutdown(self) -> None:
         self.close()
+        for pid in self._copies:  # our children: their numbers stay theirs until reaped here
+            try:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+        self._copies.clear()
         self._folder.remove()
         if self._lock >= 0:
             os.close(self._lock)

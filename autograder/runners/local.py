@@ -2,21 +2,27 @@
 
 Each slot holds one :class:`Grader` and its warm worker and grades one file at a
 time, writing the result's files itself (same machine, same file system). This
-process is slot 0: it starts its warm worker first and collects the checks while
-the worker imports its libraries; only once that worker is ready are the pool's
-``N - 1`` slot processes started (spawned: each imports the engine and starts a
-warm worker of its own), and a pool process gets a file only once it is ready
-itself. On a machine with few cores the first result then waits for one slot's
-start-up, not for every slot's at once, and a small batch never waits for the
-pool. Every slot takes the next file when it is free.
+process is slot 0. The pool's ``N - 1`` slot processes are started (spawned: each
+imports the engine and collects the checks) while slot 0's warm parent imports
+numpy, matplotlib and IPython; they do not import those again: once slot 0's warm
+parent is ready, and before its first submission, it forks a copy of itself for
+each of them (:meth:`GradingSlot.warm_copies`), which this process adopts as its
+own child and hands to a pool process (:meth:`GradingSlot.adopt`). So every slot is
+warm about when slot 0 is, and the start-up costs one import of the libraries, not
+``N`` on the same cores. A pool process gets a file only once it is ready and slot
+0 has checked the assignment's requirements; a pool rebuilt after a slot process
+died starts warm parents of its own. Every slot takes the next file when it is free.
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
 import multiprocessing
 import multiprocessing.util
 import os
+import queue
+import socket
 import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -47,17 +53,50 @@ def grade_one(grader: Grader, path: Path, sub_id: str, out_dir: Path) -> Submiss
                                 title=grader.assignment.title)
 
 
-def _init_slot(assignment_root: str, options: GradingOptions, counter: Any) -> None:
+def _init_slot(assignment_root: str, options: GradingOptions, counter: Any,
+               copies: Any | None, cores: set[int] | None) -> None:
+    """A pool process's slot: a grader whose warm parent is one of slot 0's copies.
+
+    ``copies`` (a queue; None in a pool rebuilt after a death) gives each process
+    one item: a copy's pid and control socket, or None when slot 0 made no copy for
+    it (then this slot starts its own warm parent). ``cores``: the cores the batch
+    may use; this process was started away from slot 0's core (see
+    :meth:`_PoolFeeder.run`) and gets them all back here, before its slot picks one.
+    """
     global _GRADER
+    if cores is not None:
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(0, cores)
     with counter.get_lock():
         slot = counter.value
         counter.value += 1
-    _GRADER = Grader(load_assignment(Path(assignment_root)), options, slot=slot)
+    worker = GradingSlot(slot=slot)
+    _GRADER = Grader(load_assignment(Path(assignment_root)), options, started_slot=worker)
     # A pool process ends through os._exit, which skips atexit: multiprocessing's own
     # exit finalizers are what run there. Without this the slot's warm worker and its
     # home folder (``autograder-slot-*``) outlived every ``--jobs N`` run.
     multiprocessing.util.Finalize(_GRADER, _GRADER.close, exitpriority=10)
+    try:
+        _GRADER.collect()  # while slot 0's warm parent imports
+    except Exception:  # prepare() and grade() meet it again; grade() reports it
+        pass
+    copy = _wait_for_copy(copies) if copies is not None else None
+    if copy is not None:
+        worker.adopt(*copy)
     _GRADER.prepare()
+
+
+def _wait_for_copy(copies: Any) -> tuple[int, socket.socket] | None:
+    """This process's item from ``copies``; exit if the process that gives them died."""
+    parent = multiprocessing.parent_process()
+    while True:
+        try:
+            item = copies.get(timeout=0.5)
+        except queue.Empty:
+            if parent is not None and not parent.is_alive():
+                raise SystemExit("the grading process that started this slot is gone") from None
+            continue
+        return None if item is None else (int(item[0]), item[1])
 
 
 def _slot_ready() -> bool:
@@ -84,9 +123,9 @@ class LocalBackend:
         slots = max(1, min(self.jobs or os.cpu_count() or 1, len(jobs) or 1))
         queue = _Queue(jobs)
         with Grader(assignment, options, started_slot=self.started_slot) as grader:
-            grader.prepare()
-            grader.check_requirements()  # before any result: a missing package stops the run
             if slots == 1:
+                grader.prepare()
+                grader.check_requirements()  # before any result: a missing package stops the run
                 while (job := queue.take()) is not None:
                     finished(grade_one(grader, job.path, job.id, out_dir))
                 return
@@ -133,16 +172,28 @@ def _grade_beside_pool(grader: Grader, options: GradingOptions, processes: int, 
         with lock:
             finished(result)
 
-    feeder = _PoolFeeder(grader.assignment, options, processes, queue, out_dir, report)
-    feeder.start()
+    feeder = _PoolFeeder(grader.assignment, options, processes, queue, out_dir, report,
+                         avoid=grader.core)
+    feeder.start()  # its processes import the engine while this slot's warm parent imports
     try:
+        copies: list[tuple[int, socket.socket]] = []
+        try:
+            grader.prepare()
+            copies = grader.warm_copies(processes)  # before this slot's first submission
+        finally:
+            feeder.give(copies)  # a pool process waits for its item: always one each
+        grader.check_requirements()  # before any result: a missing package stops the run
+        feeder.checked.set()
         while (job := queue.take()) is not None:
             report(grade_one(grader, job.path, job.id, out_dir))
     except BaseException:
         queue.close()  # the pool finishes the files it holds (whole results), and stops
         raise
     finally:
+        feeder.checked.set()
         feeder.join()
+        for _, control in copies:  # handed over (a pool process holds its own end now)
+            control.close()
     if feeder.failure is not None:
         raise feeder.failure
 
@@ -158,14 +209,38 @@ class _PoolFeeder(threading.Thread):
     """
 
     def __init__(self, assignment: Assignment, options: GradingOptions, processes: int,
-                 queue: _Queue, out_dir: Path, report: Finished) -> None:
+                 queue: _Queue, out_dir: Path, report: Finished, *, avoid: int | None) -> None:
         super().__init__(name="autograder-pool-feeder", daemon=True)
+        self._avoid = avoid  # slot 0's core
+        self._cores: set[int] | None = None
         self._assignment, self._options, self._processes = assignment, options, processes
         self._queue, self._out_dir, self._report = queue, out_dir, report
         self._attempts: dict[str, int] = {}
         self.failure: BaseException | None = None
+        #: set once slot 0 checked the requirements (or stopped): no job is handed out before
+        self.checked = threading.Event()
+        self._context = multiprocessing.get_context("spawn")
+        #: slot 0's warm parent copies for the first pool's processes (see :func:`_init_slot`)
+        self._copies: Any = self._context.Queue()
+        self._first_pool = True
+
+    def give(self, copies: Sequence[tuple[int, socket.socket]]) -> None:
+        """One item per pool process: a warm parent copy, or None (it starts its own)."""
+        for index in range(self._processes):
+            self._copies.put(copies[index] if index < len(copies) else None)
 
     def run(self) -> None:
+        # The pool's processes import the engine while slot 0's warm parent imports on its
+        # core: started from this thread kept off that core, they leave it alone (and slot
+        # 0's first result is not later than without a pool). Affinity is per thread and
+        # inherited by what the thread starts; a pool process takes every core back.
+        self._cores = None
+        if self._avoid is not None:
+            with contextlib.suppress(OSError):
+                cores = os.sched_getaffinity(0)
+                if cores - {self._avoid}:
+                    os.sched_setaffinity(0, cores - {self._avoid})
+                    self._cores = cores
         try:
             while self._one_pool():
                 pass
@@ -182,13 +257,15 @@ class _PoolFeeder(threading.Thread):
         """Feed one pool until no job is left; True when it broke and is worth rebuilding."""
         if not self._queue:
             return False
-        context = multiprocessing.get_context("spawn")
+        context = self._context
+        # A rebuilt pool starts its own warm parents: the copies were for the first one.
+        copies, self._first_pool = (self._copies if self._first_pool else None), False
         try:
             counter = context.Value("i", 1)  # slot 0 is this process's
             pool = ProcessPoolExecutor(max_workers=self._processes, mp_context=context,
                                        initializer=_init_slot,
                                        initargs=(str(self._assignment.root), self._options,
-                                                 counter))
+                                                 counter, copies, self._cores))
             try:
                 # A call runs once its process's initializer is done: its answer says "ready".
                 running: dict[Future[Any], Job | None] = {
@@ -213,6 +290,8 @@ class _PoolFeeder(threading.Thread):
                     died = self._collect(future, job)
                     broken = broken or died
                     ready = ready or (job is None and not died)
+                    if job is None and not died:
+                        self.checked.wait()
                     if not broken and (job := self._queue.take()) is not None:
                         running[pool.submit(_grade_in_slot, str(job.path), job.id,
                                             str(self._out_dir))] = job

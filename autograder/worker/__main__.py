@@ -10,7 +10,11 @@ Control messages (JSON frames from :mod:`autograder.boundary.frames`):
 
 * grader -> parent ``{"op": "spawn", ...}`` followed by one file descriptor
   (the submission's socket, sent with ``SCM_RIGHTS``);
-* parent -> grader ``{"pid": <child pid>}``.
+* parent -> grader ``{"pid": <child pid>}``;
+* grader -> parent ``{"op": "clone"}`` followed by one file descriptor (the copy's
+  control socket), accepted only before the first spawn: the parent forks a copy of
+  itself for another slot (see :func:`_clone`) and answers ``{"pid": <copy's pid>}``,
+  or ``{"error": ...}``.
 
 Nothing of a submission passes through this process (see :func:`_cells`): the
 child receives its cells from the grader once it is sandboxed.
@@ -67,7 +71,7 @@ import matplotlib.tri  # noqa: E402,F401
 from autograder.boundary import frames  # noqa: E402
 from autograder.errors import ProtocolError  # noqa: E402
 
-from autograder.sandbox import confine, landlock, readable  # noqa: E402
+from autograder.sandbox import confine, kernel, landlock, readable  # noqa: E402
 from autograder.sandbox.policy import IsolationPolicy, Limits  # noqa: E402
 
 from autograder.sandbox import seccomp  # noqa: E402
@@ -269,15 +273,100 @@ def _quiet_standard_streams() -> None:
     os.close(null)
 
 
-def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
+def _serve(control: socket.socket, shell: execute.GradingShell) -> int:
+    """Answer the grader's requests until its end of ``control`` closes."""
+    frames.send_message(control, {"op": "hello", "pid": os.getpid(),
+                                    "python": sys.version.split()[0], "time": time.time()})
+    while True:
+        try:
+            request = frames.recv_message(control)
+            _, fds, _, _ = socket.recv_fds(control, 1, 1)
+        except (EOFError, OSError, ProtocolError):
+            return 0
+        op = request.get("op") if isinstance(request, dict) and len(fds) == 1 else None
+        if op == "spawn":
+            _spawn(control, request, socket.socket(fileno=fds[0]), shell)
+        elif op == "clone":
+            _clone(control, fds[0], shell)
+        else:
+            return 0
+
+
+def _clone(control: socket.socket, fd: int, shell: execute.GradingShell) -> None:
+    """Fork a warm parent for another slot of the same grader, as the grader's own child.
+
+    The copy costs a fork instead of a second interpreter importing numpy, matplotlib
+    and IPython (about a second of CPU, which on 2 cores delayed the second slot's
+    first submission by as much). Only before the first spawn: nothing of a submission,
+    nor of this slot's settings, has reached this process yet.
+
+    The copy must not be this process's child: this process reaps its children, and a
+    slot's CPU clock (an ordinary user's) counts what it reaped, and closing this slot
+    kills its descendants. So the fork goes through an intermediate that exits at once
+    while this process is, for that moment, no child subreaper: the copy is then
+    adopted by the grader, which made itself the subreaper for the request and is the
+    one that reaps it. Why by hand: ``clone(CLONE_PARENT)`` does this in one call but
+    Python's ``os.fork`` is the only fork that keeps the interpreter sound.
+    """
+    if _FORKED[0] or _APPLIED[0] is not None:
+        os.close(fd)
+        frames.send_message(control, {"error": "this warm parent already served a slot"})
+        return
+    grader = os.getppid()
+    kernel.prctl(_PR_SET_CHILD_SUBREAPER, 0)
     try:
-        request = frames.recv_message(control)
-        _, fds, _, _ = socket.recv_fds(control, 1, 1)
-    except (EOFError, OSError, ProtocolError):
-        return False
-    if not isinstance(request, dict) or request.get("op") != "spawn" or len(fds) != 1:
-        return False
-    sub = socket.socket(fileno=fds[0])
+        reader, writer = os.pipe()
+        middle = os.fork()
+        if middle == 0:  # the intermediate: fork the copy, say its pid, exit
+            try:
+                os.close(reader)
+                copy = os.fork()
+                if copy == 0:
+                    os.close(writer)
+                    _become_copy(control, fd, shell, grader, os.getppid())
+                os.write(writer, str(copy).encode())
+            finally:
+                os._exit(0)
+        os.close(writer)
+        with os.fdopen(reader, "rb") as answer:
+            said = answer.read()
+        try:
+            os.waitpid(middle, 0)
+        except ChildProcessError:  # reaped by the SIGCHLD handler already
+            pass
+    finally:
+        kernel.prctl(_PR_SET_CHILD_SUBREAPER, 1)
+        os.close(fd)
+    frames.send_message(control, {"pid": int(said)} if said.isdigit()
+                        else {"error": "the copy could not be forked"})
+
+
+def _become_copy(control: socket.socket, fd: int, shell: execute.GradingShell,
+                 grader: int, middle: int) -> None:
+    """The copy: wait to be adopted by the grader, then serve on ``fd``. Never returns."""
+    code = 0
+    try:
+        control.close()  # the first slot's: that slot's grader alone talks on it
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 2)  # not the first slot's stderr pipe, which its grader reads to EOF
+        os.close(null)
+        os.chdir("/")  # not the first slot's folder, which is removed when that slot ends
+        deadline = time.monotonic() + 10
+        while os.getppid() == middle and time.monotonic() < deadline:
+            time.sleep(0.0002)
+        _die_with_parent()
+        if os.getppid() != grader:  # adopted by someone else: the grader is gone, or no subreaper
+            os._exit(1)
+        _adopt_orphans()
+        code = _serve(socket.socket(fileno=fd), shell)
+    except BaseException:
+        code = 70
+    finally:
+        os._exit(code)
+
+
+def _spawn(control: socket.socket, request: dict[str, Any], sub: socket.socket,
+           shell: execute.GradingShell) -> None:
     # The last child, killed and swept before this request, is reaped now if it was not
     # yet: its CPU time then lands in this process's before the next child's clock starts
     # (autograder.sandbox.cputime counts the reaped children of this process).
@@ -310,7 +399,6 @@ def _spawn(control: socket.socket, shell: execute.GradingShell) -> bool:
     _FORKED[0] += 1
     if _FORKED[0] == hugepages.COLLAPSE_AFTER:  # while that child runs; a short batch never pays
         hugepages.collapse()
-    return True
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -325,11 +413,7 @@ def main(argv: list[str] | None = None) -> int:
     readable.prime_caches()
     seccomp.prepare_filters()
     signal.signal(signal.SIGCHLD, _reap)
-    frames.send_message(control, {"op": "hello", "pid": os.getpid(),
-                                    "python": sys.version.split()[0], "time": time.time()})
-    while _spawn(control, shell):
-        pass
-    return 0
+    return _serve(control, shell)
 
 
 if __name__ == "__main__":
