@@ -282,7 +282,7 @@ class Grader:
         Call it after :meth:`prepare` and before the first submission; see
         :meth:`autograder.engine.slot.GradingSlot.warm_copies`.
         """
-        return self._slot.warm_copies(count)
+        return self._slot.warm_copies(count, forbid=self.assignment.rules.to_wire())
 
     def check_requirements(self) -> None:
         """Raise :class:`AssignmentError` unless every requirement imports in the worker.

@@ -259,10 +259,13 @@ class GradingSlot:
                 theirs.close()
         raise AssertionError("unreachable")
 
-    def warm_copies(self, count: int) -> list[tuple[int, socket.socket]]:
+    def warm_copies(self, count: int, *, forbid: dict[str, Any] | None = None,
+                    ) -> list[tuple[int, socket.socket]]:
         """Up to ``count`` copies of this slot's warm parent, each with its control socket.
 
-        Only before this slot's first submission (the warm parent refuses after). Each
+        ``forbid``: the assignment's forbidden libraries (as in a spawn request), applied
+        once before the copies are made so that they inherit it. Only before this slot's
+        first submission (the warm parent refuses after). Each
         copy is this process's child: it dies with this process, and
         :meth:`shutdown` kills and reaps it (the slot that adopted it normally ended
         it before). Fewer copies, or none, when the kernel has no pidfds or a copy
@@ -275,13 +278,16 @@ class GradingSlot:
             self.start()
         except (AutograderError, OSError):  # the next spawn reports it; the others start their own
             return copies
-        was = _subreaper(True)  # the copy is adopted by this process, see worker._clone
+        try:
+            was = _subreaper(True)  # the copy is adopted by this process, see worker._clone
+        except OSError:  # not allowed here: the other slots start their own
+            return copies
         try:
             for _ in range(count):
                 ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
                 try:
                     assert self._control is not None
-                    frames.send_message(self._control, {"op": "clone"})
+                    frames.send_message(self._control, {"op": "clone", "forbid": forbid or {}})
                     socket.send_fds(self._control, [b"F"], [theirs.fileno()])
                     answer = frames.recv_message(self._control, timeout=30)
                 except (OSError, EOFError, ProtocolError):

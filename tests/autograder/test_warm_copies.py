@@ -67,7 +67,7 @@ def test_a_copy_is_the_graders_child_grades_alike_and_is_reaped(tmp_path: Path,
     subreaper_before = _subreaper()
     try:
         first.start()
-        [(pid, control)] = first.warm_copies(1)
+        [(pid, control)] = first.warm_copies(1, forbid=assignment.rules.to_wire())
         assert _subreaper() == subreaper_before  # the grader adopts orphans only meanwhile
         assert psutil.Process(pid).ppid() == os.getpid()
         assert first.warm_parent is not None
@@ -82,7 +82,7 @@ def test_a_copy_is_the_graders_child_grades_alike_and_is_reaped(tmp_path: Path,
                                   out_dir=tmp_path / f"out{len(scores)}")
             scores.append((graded.score, graded.outcome, [t.status for t in graded.tests]))
             # Served a submission: no copy of it any more (the slots left start their own).
-            assert first.warm_copies(1) == []
+            assert first.warm_copies(1, forbid=assignment.rules.to_wire()) == []
         assert scores[0] == scores[1]
         assert scores[0][1] == "graded" and {"passed", "failed"} <= set(scores[0][2])
         graders[1].close()  # the slot that adopted the copy kills it; its zombie is ours
@@ -136,8 +136,8 @@ def test_pool_slots_grade_on_copies_and_leave_nothing(tmp_path: Path,
     made: list[int] = []
     original = GradingSlot.warm_copies
 
-    def recorded(self: GradingSlot, count: int) -> list[Any]:
-        copies = original(self, count)
+    def recorded(self: GradingSlot, count: int, **kwargs: Any) -> list[Any]:
+        copies = original(self, count, **kwargs)
         made.extend(pid for pid, _ in copies)
         return copies
 
