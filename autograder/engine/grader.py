@@ -250,8 +250,9 @@ class Grader:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def prepare(self) -> None:
-        """Start the warm worker and collect the checks now; return once the worker is ready.
+    def prepare(self, *, wait: bool = True) -> None:
+        """Start the warm worker and collect the checks now; return once the worker is ready
+        (with ``wait=False``: once the checks are collected, the worker still starting).
 
         The worker imports numpy, scipy and matplotlib in its own process while this
         one collects the checks, so the first submission waits for neither. Optional:
@@ -262,7 +263,8 @@ class Grader:
         self._slot.start(wait=False)
         try:
             self.collect()
-            self._slot.start()
+            if wait:
+                self._slot.start()
         except Exception:  # see the docstring: grade() reports it with each submission
             pass
 

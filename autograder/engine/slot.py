@@ -13,6 +13,7 @@ that this grader adopts as its own children, and another slot takes one over wit
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import fcntl
 import os
@@ -142,6 +143,14 @@ class _Copy:
             self.poll()
         assert self.returncode is not None
         return self.returncode
+
+
+def _own_child(pid: int) -> bool:
+    """Whether ``pid`` is an unreaped child of this process (so the number is still its own)."""
+    try:
+        return os.waitpid(pid, os.WNOHANG) == (0, 0)
+    except ChildProcessError:  # not ours, or reaped already
+        return False
 
 
 def _subreaper(on: bool) -> bool:
@@ -296,11 +305,12 @@ class GradingSlot:
                     break
                 finally:
                     theirs.close()
-                if not isinstance(answer, dict) or not isinstance(answer.get("pid"), int):
+                pid = answer.get("pid") if isinstance(answer, dict) else None
+                if not isinstance(pid, int) or not _own_child(pid):
                     ours.close()
                     break
-                self._copies.append(answer["pid"])
-                copies.append((answer["pid"], ours))
+                self._copies.append(pid)
+                copies.append((pid, ours))
         finally:
             if not was:
                 _subreaper(False)
@@ -344,11 +354,10 @@ class GradingSlot:
     def shutdown(self) -> None:
         self.close()
         for pid in self._copies:  # our children: their numbers stay theirs until reaped here
-            try:
+            if _own_child(pid):
                 os.kill(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
-            except (ProcessLookupError, ChildProcessError):
-                pass
+                with contextlib.suppress(ChildProcessError):
+                    os.waitpid(pid, 0)
         self._copies.clear()
         self._folder.remove()
         if self._lock >= 0:

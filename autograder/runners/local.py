@@ -2,9 +2,10 @@
 
 Each slot holds one :class:`Grader` and its warm worker and grades one file at a
 time, writing the result's files itself (same machine, same file system). This
-process is slot 0. The pool's ``N - 1`` slot processes are started (spawned: each
-imports the engine and collects the checks) while slot 0's warm parent imports
-numpy, matplotlib and IPython; they do not import those again: once slot 0's warm
+process is slot 0. Once it has collected its checks, the pool's ``N - 1`` slot
+processes are started (spawned: each imports the engine and collects the checks),
+away from slot 0's core, while slot 0's warm parent imports numpy, matplotlib and
+IPython there; they do not import those again: once slot 0's warm
 parent is ready, and before its first submission, it forks a copy of itself for
 each of them (:meth:`GradingSlot.warm_copies`), which this process adopts as its
 own child and hands to a pool process (:meth:`GradingSlot.adopt`). So every slot is
@@ -174,10 +175,11 @@ def _grade_beside_pool(grader: Grader, options: GradingOptions, processes: int, 
 
     feeder = _PoolFeeder(grader.assignment, options, processes, queue, out_dir, report,
                          avoid=grader.core)
-    feeder.start()  # its processes import the engine while this slot's warm parent imports
     try:
         copies: list[tuple[int, socket.socket]] = []
         try:
+            grader.prepare(wait=False)  # this slot's checks first, then the pool's imports:
+            feeder.start()  # beside this slot's warm parent importing (not on its core)
             grader.prepare()
             copies = grader.warm_copies(processes)  # before this slot's first submission
         finally:
@@ -191,7 +193,8 @@ def _grade_beside_pool(grader: Grader, options: GradingOptions, processes: int, 
         raise
     finally:
         feeder.checked.set()
-        feeder.join()
+        if feeder.ident is not None:  # started
+            feeder.join()
         for _, control in copies:  # handed over (a pool process holds its own end now)
             control.close()
     if feeder.failure is not None:
