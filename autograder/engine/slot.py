@@ -14,7 +14,6 @@ that this grader adopts as its own children, and another slot takes one over wit
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import fcntl
 import os
 import select
@@ -41,8 +40,6 @@ STARTUP_TIMEOUT = 600.0
 #: only root may write, so no other user can plant the folder or its files beforehand
 ROOT_SLOT_LOCKS = Path("/run/autograder-slots")
 MAX_SLOTS = 1000
-_PR_SET_CHILD_SUBREAPER = 36
-_PR_GET_CHILD_SUBREAPER = 37
 
 
 def slot_lock_dir() -> Path:
@@ -151,16 +148,6 @@ def _own_child(pid: int) -> bool:
         return os.waitpid(pid, os.WNOHANG) == (0, 0)
     except ChildProcessError:  # not ours, or reaped already
         return False
-
-
-def _subreaper(on: bool) -> bool:
-    """Set whether this process adopts its descendants' orphans; return what it was."""
-    was = ctypes.c_int(0)
-    kernel.check("prctl", kernel.libc().prctl(ctypes.c_int(_PR_GET_CHILD_SUBREAPER),
-                                              ctypes.byref(was), ctypes.c_ulong(0),
-                                              ctypes.c_ulong(0), ctypes.c_ulong(0)))
-    kernel.prctl(_PR_SET_CHILD_SUBREAPER, int(on))
-    return bool(was.value)
 
 
 class GradingSlot:
@@ -288,7 +275,7 @@ class GradingSlot:
         except (AutograderError, OSError):  # the next spawn reports it; the others start their own
             return copies
         try:
-            was = _subreaper(True)  # the copy is adopted by this process, see worker._clone
+            was = kernel.child_subreaper(True)  # the copy is adopted by this process, see worker._clone
         except OSError:  # not allowed here: the other slots start their own
             return copies
         try:
@@ -313,7 +300,7 @@ class GradingSlot:
                 copies.append((pid, ours))
         finally:
             if not was:
-                _subreaper(False)
+                kernel.child_subreaper(False)
         return copies
 
     def adopt(self, pid: int, control: socket.socket) -> bool:

@@ -237,7 +237,6 @@ class _PoolFeeder(threading.Thread):
         # core: started from this thread kept off that core, they leave it alone (and slot
         # 0's first result is not later than without a pool). Affinity is per thread and
         # inherited by what the thread starts; a pool process takes every core back.
-        self._cores = None
         if self._avoid is not None:
             with contextlib.suppress(OSError):
                 cores = os.sched_getaffinity(0)

@@ -13,7 +13,7 @@ import functools
 import os
 
 __all__ = ["CLONE_NEWIPC", "CLONE_NEWNET", "CLONE_NEWNS", "CLONE_NEWUSER", "CLONE_NEWUTS",
-           "capset", "check", "libc", "mount", "prctl", "setns", "unshare"]
+           "capset", "check", "child_subreaper", "libc", "mount", "prctl", "setns", "unshare"]
 
 # <sched.h>: flags of unshare(2) and setns(2). CLONE_NEWNET makes a new, empty
 # network namespace (only ``lo``, down).
@@ -22,6 +22,9 @@ CLONE_NEWUTS = 0x04000000
 CLONE_NEWIPC = 0x08000000
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWNET = 0x40000000
+# <linux/prctl.h>: whether a process adopts the orphans among its descendants
+PR_SET_CHILD_SUBREAPER = 36
+PR_GET_CHILD_SUBREAPER = 37
 # <linux/capability.h>: header version of capset(2) with two 32-bit data words.
 LINUX_CAPABILITY_VERSION_3 = 0x20080522
 
@@ -78,6 +81,15 @@ def prctl(option: int, arg: int) -> None:
     # prctl(2) is variadic: pass every argument as a full unsigned long.
     args = [ctypes.c_ulong(value) for value in (arg, 0, 0, 0)]
     check("prctl", libc().prctl(ctypes.c_int(option), *args))
+
+
+def child_subreaper(on: bool) -> bool:
+    """Set whether this process adopts its descendants' orphans; return what it was."""
+    was = ctypes.c_int(0)
+    check("prctl", libc().prctl(ctypes.c_int(PR_GET_CHILD_SUBREAPER), ctypes.byref(was),
+                                ctypes.c_ulong(0), ctypes.c_ulong(0), ctypes.c_ulong(0)))
+    prctl(PR_SET_CHILD_SUBREAPER, int(on))
+    return bool(was.value)
 
 
 @functools.cache

@@ -38,7 +38,6 @@ from pathlib import Path
 from typing import Any
 
 _PR_SET_PDEATHSIG = 1
-_PR_SET_CHILD_SUBREAPER = 36
 
 
 def _die_with_parent() -> None:
@@ -91,8 +90,7 @@ def _adopt_orphans() -> None:
     (:func:`autograder.sandbox.reaper.kill_descendants`), even those whose parent died.
     """
     try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+        kernel.child_subreaper(True)
     except (OSError, AttributeError):  # not Linux
         pass
 
@@ -320,7 +318,7 @@ def _clone(control: socket.socket, request: dict[str, Any], fd: int,
         _apply_forbid(request)
         _APPLIED[0] = _forbid_key(request)
     grader = os.getppid()
-    kernel.prctl(_PR_SET_CHILD_SUBREAPER, 0)
+    was = kernel.child_subreaper(False)
     try:
         reader, writer = os.pipe()
         middle = os.fork()
@@ -342,7 +340,7 @@ def _clone(control: socket.socket, request: dict[str, Any], fd: int,
         except ChildProcessError:  # reaped by the SIGCHLD handler already
             pass
     finally:
-        kernel.prctl(_PR_SET_CHILD_SUBREAPER, 1)
+        kernel.child_subreaper(was)
         os.close(fd)
     frames.send_message(control, {"pid": int(said)} if said.isdigit()
                         else {"error": "the copy could not be forked"})
