@@ -290,8 +290,13 @@ def kill_descendants(root: int) -> bool:
     parent is a child subreaper, so a process whose parent died is re-parented to
     it rather than to init, and the whole tree stays below it. Each round kills
     what it finds; a killed process cannot fork again, so the rounds end. A listing
-    of ``/proc`` is not atomic (a child may get a pid the listing already passed), so
-    only several empty rounds in a row count as "none left". A backstop: the seccomp
+    of ``/proc`` is not atomic (a child may get a pid the listing already passed, and
+    a process that forks and exits at once is gone before its entry is read while its
+    child was born after the listing), so a round is empty only when the listing finds
+    nothing and ``root``'s own list of children, which the kernel keeps whole (an
+    orphan moves to it as its parent exits), holds no live process and did not change
+    while it was read; and only several empty rounds in a row count as "none left".
+    A backstop: the seccomp
     filter keeps every process in the child's process group, which is killed first.
     Each process is signalled through a pidfd, and only if it is still the process
     the listing saw (same number and start time): the one listed may have been
@@ -301,13 +306,48 @@ def kill_descendants(root: int) -> bool:
     quiet = 0
     for _ in range(KILL_ROUNDS):
         found = _descendants(root)
-        quiet = 0 if found else quiet + 1
+        children, changed = _live_children(root)
+        found.update(children)
+        quiet = 0 if found or changed else quiet + 1
         if quiet >= QUIET_ROUNDS:
             return True
         for pid, started in found.items():
             _kill_listed(pid, started)
         time.sleep(0.002)
-    return not _descendants(root)
+    children, changed = _live_children(root)
+    return not (_descendants(root) or children or changed)
+
+
+def _child_list(root: int) -> set[int] | None:
+    """The children of every thread of ``root``, as the kernel lists them; None once it is gone."""
+    try:
+        threads = os.listdir(f"/proc/{root}/task")
+    except OSError:
+        return None
+    found: set[int] = set()
+    for thread in threads:
+        raw = _read_proc(f"/proc/{root}/task/{thread}/children", 1 << 20)
+        found.update(int(n) for n in (raw or b"").split())
+    return found
+
+
+def _live_children(root: int) -> tuple[dict[int, int], bool]:
+    """``root``'s live children (pid -> start time), and whether its list grew meanwhile.
+
+    A child that exits just after the list was read may have forked first; its
+    child then moved to ``root``'s list before it became a zombie, so the list read
+    again afterwards shows the newcomer.
+    """
+    before = _child_list(root)
+    if before is None:
+        return {}, False
+    live: dict[int, int] = {}
+    for pid in before:
+        info = _proc_stat(pid)
+        if info is not None and info.state != b"Z":
+            live[pid] = info.started
+    after = _child_list(root)
+    return live, bool((after or set()) - before)
 
 
 def _kill_listed(pid: int, started: int) -> None:
