@@ -14,6 +14,8 @@ import os
 import select
 import shutil
 import signal
+import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Iterator
@@ -32,6 +34,7 @@ from autograder.sandbox.reaper import (
 )
 from autograder.sandbox import cgroups, pidfd
 from autograder.sandbox.confine import enter_sandbox
+from autograder.sandbox.cputime import CpuClock
 from autograder.sandbox.policy import IsolationPolicy
 from autograder.sandbox.support import probe_support
 
@@ -235,6 +238,47 @@ def test_a_sweep_waits_for_a_killed_child_without_a_kill_round(
     signal.pidfd_send_signal(fd, signal.SIGKILL)
     assert group.kill_all(killed={pid: fd})
     assert rounds == [], "a killed child alone in the slot needs no kill round"
+
+
+def _open_files() -> set[str]:
+    """What this process's descriptors point to (the listing's own descriptor left out)."""
+    found = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            found.add(f"{fd} {os.readlink(f'/proc/self/fd/{fd}')}")
+        except OSError:
+            pass
+    return found
+
+
+def test_the_clock_keeps_the_slot_usage_file_open_reads_it_afresh_and_closes_it() -> None:
+    # As root the clock reads the slot cgroup's usage at the end of every call: one
+    # file, opened once (an open, read and close per call cost ten times a pread).
+    group = require_cgroups()
+    assert group.usage is not None
+    burner = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time\nsys.stdin.readline()\n"
+         "while time.process_time() < 0.3:\n    pass\nprint('done', flush=True)\n"
+         "sys.stdin.readline()\n"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, preexec_fn=group.join)
+    try:
+        before = _open_files()
+        clock = CpuClock(burner.pid, usage=group)
+        assert clock.usage is group  # the usage file was readable: the cgroup counts
+        clock.start()
+        assert any(entry.endswith(f" {group.usage}") for entry in _open_files() - before)
+        assert clock.own() < 0.1
+        assert burner.stdin is not None and burner.stdout is not None
+        burner.stdin.write("go\n")
+        burner.stdin.flush()
+        assert burner.stdout.readline().strip() == "done"
+        assert clock.own() >= 0.25  # the same open file, read again
+        clock.close()
+        assert _open_files() == before
+    finally:
+        burner.kill()
+        burner.wait()
+        assert group.kill_all()
 
 
 def test_kill_all_ends_a_process_that_reforks(reaped: list[int]) -> None:
