@@ -87,15 +87,6 @@ class SlotCgroup:
             return set()
         return {int(line) for line in text.split()}
 
-    def cpu_seconds(self) -> float | None:
-        """CPU seconds the slot's processes used so far (None when it cannot be read)."""
-        if self.usage is None:
-            return None
-        try:
-            return parse_usage(self.usage.read_bytes(), self.version)
-        except OSError:
-            return None
-
     def kill_all(self, *, killed: dict[int, int] | None = None) -> bool:
         """Kill every process of the slot; True when none is left.
 
