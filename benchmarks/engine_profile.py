@@ -1,7 +1,7 @@
 """Where one submission's time goes: grade hull submissions with one Grader and time each phase.
 
 Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]
-[--trivial]``.
+[--trivial | --released] [--json PATH]``.
 
 Grades ``count`` submissions (the hull assignment's examples, in turn, or with
 ``--trivial`` the one-cell, one-check assignment of ``engine_vs_peers.py``) with one
@@ -57,6 +57,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # this checkout, whatever is installed
 
 import pytest  # noqa: E402
+from _record import Figure, add_json_option, record  # noqa: E402
 
 from autograder.engine import checkrun  # noqa: E402
 
@@ -272,6 +273,7 @@ def main() -> None:
                         help="hull submissions written into the released notebook (every cell "
                         "of it, its test cells too), as engine_vs_peers.py grades them, instead "
                         "of the three-cell examples")
+    add_json_option(parser, "engine_profile")
     options = parser.parse_args()
 
     before = None if options.no_before else load_before(options.before)
@@ -293,9 +295,13 @@ def main() -> None:
         else:
             folder, examples = HULL, sorted((HULL / "examples").glob("*.ipynb"))
         rows = profile(folder, examples, options.count, probes, old_sweep, scan_pairs)
-    report(rows, scan_pairs, before is not None, options.before,
-           "trivial assignment" if options.trivial else
-           "hull, released notebooks" if options.released else "hull")
+    name = ("trivial assignment" if options.trivial else
+            "hull, released notebooks" if options.released else "hull")
+    figures = report(rows, scan_pairs, before is not None, options.before, name)
+    record("engine_profile", figures, path=options.json,
+           notes=f"{name}: {options.count} submissions timed with one Grader after one warm-up; "
+           "medians per submission (the CPU total and shares from means); CPU = grader + "
+           "warm parent + child.")
 
 
 def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
@@ -317,7 +323,8 @@ def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
 
 def report(rows: list[tuple[Probe, bool, float, float]],
            scan_pairs: list[tuple[float, float, bool]], compared: bool, ref: str,
-           name: str) -> None:
+           name: str) -> list[Figure]:
+    """Print the breakdown (and with ``compared`` the old code's ratios); return its figures."""
     # With --before the old sweep ran on every other submission: the breakdown uses the others.
     current = [row for row in rows if not (compared and row[1])] or rows
     for probe, _, wall, cpu in current:
@@ -332,21 +339,30 @@ def report(rows: list[tuple[Probe, bool, float, float]],
           "after one warm-up submission; CPU = grader + warm parent + child")
     print(f"{'phase':28} {'wall ms':>9} {'CPU ms':>9} {'grader':>8} {'worker':>8} "
           f"{'CPU share':>10}")
+    figures = []
     for phase in PHASES:
-        print(f"{phase:28} {median_ms([p.wall[phase] for p, *_ in current]):9.1f} "
-              f"{median_ms([p.total_cpu(phase) for p, *_ in current]):9.1f} "
-              f"{median_ms([p.cpu[phase] for p, *_ in current]):8.1f} "
-              f"{median_ms([p.worker[phase] for p, *_ in current]):8.1f} "
-              f"{100 * means[phase] / total:9.1f}%")
+        columns = (("wall", median_ms([p.wall[phase] for p, *_ in current]), "ms"),
+                   ("CPU", median_ms([p.total_cpu(phase) for p, *_ in current]), "ms"),
+                   ("grader CPU", median_ms([p.cpu[phase] for p, *_ in current]), "ms"),
+                   ("worker CPU", median_ms([p.worker[phase] for p, *_ in current]), "ms"),
+                   ("CPU share", 100 * means[phase] / total, "%"))
+        print(f"{phase:28} {columns[0][1]:9.1f} {columns[1][1]:9.1f} {columns[2][1]:8.1f} "
+              f"{columns[3][1]:8.1f} {columns[4][1]:9.1f}%")
+        figures += [Figure(f"{phase}: {label}", value, unit) for label, value, unit in columns]
     print(f"{'whole submission':28} {median_ms([w for _, _, w, _ in current]):9.1f} "
           f"{1000 * total:9.1f}"
           "   (medians per submission; the CPU total and shares are from means)")
     print("  of which collection (inside the pytest session): "
           f"{median_ms([p.wall['collection'] for p, *_ in current]):.1f} ms wall")
-    print(f"grader process CPU per submission: {median_ms([c for *_, c in current]):.1f} ms "
+    grader_ms = median_ms([c for *_, c in current])
+    print(f"grader process CPU per submission: {grader_ms:.1f} ms "
           "(median; every phase's grader column and the rest of Grader.grade)")
+    figures += [Figure("whole submission: wall (median)",
+                       median_ms([w for _, _, w, _ in current]), "ms"),
+                Figure("whole submission: CPU (mean)", 1000 * total, "ms"),
+                Figure("grader process CPU per submission", grader_ms, "ms")]
     if not compared:
-        return
+        return figures
     old = [p for p, is_old, *_ in rows if is_old]
     new = [p for p, is_old, *_ in rows if not is_old]
     print(f"\nbefore ({ref}) / after, in this run (medians per submission):")
@@ -359,6 +375,7 @@ def report(rows: list[tuple[Probe, bool, float, float]],
     same = sum(s for _, _, s in scan_pairs)
     print(f"  {'scan wall':11} before {o:8.2f} ms  after {n:8.2f} ms  ratio {_ratio(o, n)}"
           f"  (same report on {same} of {len(scan_pairs)} submissions)")
+    return figures
 
 
 def _ratio(before: float, after: float) -> str:
