@@ -26,6 +26,7 @@ import pytest
 from autograder import api
 from autograder.results.model import SubmissionResult
 from autograder.runners import local
+from tests.support.terminal import with_ctrl_c
 
 ROOT = Path(__file__).resolve().parents[2]
 SOLUTION = ROOT / "assignments" / "hull" / "examples" / "solution.ipynb"
@@ -108,8 +109,9 @@ def test_ctrl_c_keeps_whole_results_and_leaves_nothing_behind(tmp_path: Path) ->
     scratch = tmp_path / "tmp"
     scratch.mkdir()
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "autograder", "grade", "hull", str(submissions),
-                             "--out", str(out), "--jobs", "2", "--no-progress"],
+    grade = [sys.executable, "-m", "autograder", "grade", "hull", str(submissions),
+             "--out", str(out), "--jobs", "2", "--no-progress"]
+    proc = subprocess.Popen(with_ctrl_c(grade),  # even when this pytest ignores SIGINT
                             env={**os.environ, "TMPDIR": str(scratch)}, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 600

@@ -26,6 +26,7 @@ from autograder.engine.slot import GradingSlot
 from autograder.engine.student_process import StudentProcess
 from autograder.errors import EngineError
 from autograder.sandbox.policy import IsolationPolicy
+from tests.support.terminal import with_ctrl_c
 
 ROOT = Path(__file__).resolve().parents[2]
 HULL = ROOT / "assignments" / "hull"
@@ -152,14 +153,16 @@ def test_an_interrupted_batch_stores_no_partial_result(tmp_path: Path) -> None:
         target.parent.mkdir(parents=True)
         shutil.copy(SOLUTION, target)
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "autograder", "grade", "hull", str(folder),
-                             "--out", str(out), "--jobs", "1", "--no-progress"],
+    proc = subprocess.Popen(with_ctrl_c([sys.executable, "-m", "autograder", "grade", "hull",
+                                         str(folder), "--out", str(out), "--jobs", "1",
+                                         "--no-progress"]),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 600
     while not list(out.glob("*/results.json")) and time.monotonic() < deadline:
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
-    proc.communicate(timeout=300)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err.decode()[-3000:]
     expected_checks = None
     for result in results(out).values():  # whatever was stored is complete
         expected_checks = expected_checks or len(result["tests"])
