@@ -1,9 +1,9 @@
 """This engine against the bare floor, nbgrader and otter-grader, on the same files, in one run.
 
 Usage: ``python benchmarks/engine_vs_peers.py [--quick] [--count 24] [--trivial 100]
-[--otter PATH-TO-otter] [--skip-peers]``.
+[--otter PATH-TO-otter] [--skip-peers] [--pairs K]``.
 
-What it prints (medians are not used: each figure is one run over the batch):
+What it prints (each figure is one run over the batch, but for ``--pairs``):
 
 * start-up: CPU and wall seconds of ``autograder --help`` and ``--version`` (best of
   three, beside ``python -c pass``), and for every engine run the time from the
@@ -18,7 +18,13 @@ What it prints (medians are not used: each figure is one run over the batch):
 * a trivial assignment (one cell, one check) built in a temporary folder: the
   engine overhead, total CPU per submission minus the floor's, with start-up spread
   over the batch and, from a 10-submission batch run beside it, beyond start-up
-  (what one more submission costs, and the rate of a long batch).
+  (what one more submission costs, and the rate of a long batch);
+* with ``--pairs K``, the two-core speed-up made resolvable: ``K`` alternating rounds of
+  ``--jobs 1`` and ``--jobs 2`` over the hull batch with every check (the median of
+  the ``K`` ratios of submissions/s, and of the steady rates, first result to last),
+  beside the same rounds of the bare floor on one process and on two: what two
+  cores give the per-submission work itself on this machine, with no start-up and
+  nothing of the engine.
 
 CPU is measured from outside: ``resource.getrusage(RUSAGE_CHILDREN)`` around each
 command (every process it reaped) and, for the split and for processes nobody
@@ -35,6 +41,7 @@ import json
 import os
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -163,8 +170,15 @@ def _steady_rate(results: Path | None) -> float | None:
 # -- the runs -------------------------------------------------------------------
 
 def run_floor(assignment: Path, notebooks: list[Path], public_only: bool, procs: int = 2) -> Run:
-    """The floor on ``procs`` processes, each with its share; only the warm loops are counted."""
-    shares = [notebooks[k::procs] for k in range(procs)]
+    """The floor on ``procs`` processes, each with its share; only the warm loops are counted.
+
+    Each share is a contiguous run of the batch, so each holds every kind of submission
+    alike (the batch cycles through the examples). Every ``procs``-th notebook, as
+    before, gave one process the three examples whose checks cost the most (about
+    twice the other's loop): two processes looked 1.5x one, not 2x.
+    """
+    count = len(notebooks)
+    shares = [notebooks[k * count // procs:(k + 1) * count // procs] for k in range(procs)]
     extra = ["--public-only"] if public_only else []
     running = [subprocess.Popen([PYTHON, str(HERE / "_floor.py"), str(assignment), *extra,
                                  *map(str, share)], stdout=subprocess.PIPE, text=True)
@@ -440,6 +454,53 @@ def beyond_startup(section: str, assignment: Path, notebooks: list[Path], short:
     return figures
 
 
+def jobs_pairs(batch: Path, notebooks: list[Path], work: Path, rounds: int) -> list[Figure]:
+    """``rounds`` alternating rounds of ``--jobs 1``, ``--jobs 2`` and the floor on one and
+    two processes (hull, every check); the median of each ratio, two cores over one.
+
+    One run of each moves by about 5% between sittings on a shared machine; the median
+    of alternated pairs is a figure that a change of that size can move. The floor's
+    ratio is the peer: its loops time the per-submission work alone (no imports, no
+    start-up, nothing written), so it is what two cores give that work here.
+    """
+    count = len(notebooks)
+    print_header(f"hull, {count} submissions, every check: {rounds} alternating rounds, "
+                 "two cores against one")
+    ratios: dict[str, list[float]] = {"rate": [], "steady": [], "floor": []}
+    firsts: list[float] = []
+    for k in range(rounds):
+        one = print_row(run_engine(HULL, batch, work / f"pair-{k}-1", 1, False, count))
+        two = print_row(run_engine(HULL, batch, work / f"pair-{k}-2", 2, False, count))
+        floor_one = run_floor(HULL, notebooks, False, procs=1)
+        floor_two = run_floor(HULL, notebooks, False, procs=2)
+        ratios["rate"].append(two.rate / one.rate)
+        if one.steady_rate and two.steady_rate:
+            ratios["steady"].append(two.steady_rate / one.steady_rate)
+        ratios["floor"].append(floor_two.rate / floor_one.rate)
+        if two.first_result is not None:
+            firsts.append(two.first_result)
+        print(f"  round {k + 1}: --jobs 2 / --jobs 1 {ratios['rate'][-1]:.3f}x submissions/s"
+              + (f", steady {ratios['steady'][-1]:.3f}x" if one.steady_rate and two.steady_rate
+                 else "")
+              + f"; bare floor, 2 processes / 1: {ratios['floor'][-1]:.3f}x", flush=True)
+    section = f"hull, every check, {rounds} alternating rounds"
+    figures = []
+    for key, label in (("rate", "--jobs 2 / --jobs 1, submissions/s"),
+                       ("steady", "--jobs 2 / --jobs 1, steady rate"),
+                       ("floor", "bare floor, 2 processes / 1, submissions/s")):
+        if ratios[key]:
+            middle = statistics.median(ratios[key])
+            spread = f"{min(ratios[key]):.3f}-{max(ratios[key]):.3f}"
+            print(f"  median {label}: {middle:.3f}x (range {spread})", flush=True)
+            figures += [Figure(f"{section}: {label}: median", middle, "x"),
+                        Figure(f"{section}: {label}: lowest", min(ratios[key]), "x"),
+                        Figure(f"{section}: {label}: highest", max(ratios[key]), "x")]
+    if firsts:
+        figures.append(Figure(f"{section}: --jobs 2: first result, median",
+                              statistics.median(firsts), "s"))
+    return figures
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="12 hull and 40 trivial submissions")
@@ -452,6 +513,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="hull submissions for otter, the first of the batch (one `otter run` "
                              "each, several seconds apiece; default: 6)")
     parser.add_argument("--skip-peers", action="store_true", help="no nbgrader, no otter")
+    parser.add_argument("--pairs", type=int, default=0, metavar="K",
+                        help="K alternating rounds of --jobs 1 and --jobs 2 (and the floor on "
+                             "one and two processes), every check: the median ratios "
+                             "(default: 0, none)")
     add_json_option(parser, "engine_vs_peers")
     args = parser.parse_args(argv)
     count, trivial = (12, min(40, args.trivial)) if args.quick else (args.count, args.trivial)
@@ -506,6 +571,8 @@ def hull_runs(args: argparse.Namespace, work: Path, count: int) -> list[Figure]:
         if count > SHORT:
             figures += beyond_startup(section, HULL, notebooks, short, runs[1:3], runs[0],
                                       public_only, work / f"out-short-{public_only}")
+    if args.pairs:
+        figures += jobs_pairs(batch, notebooks, work, args.pairs)
     return figures
 
 
