@@ -1,14 +1,17 @@
 """The bare floor: student cells and the same pytest checks in one warm process, no isolation.
 
-Usage (by ``engine_vs_peers.py``): ``python benchmarks/_floor.py ASSIGNMENT [--public-only]
-NOTEBOOK...``. Imports and collection happen once; then, for every notebook, its
-code cells run in a fresh namespace (IPython's transformer turns magics into
-Python, no kernel) and every collected check item runs against that namespace
-through pytest's own per-item protocol, with the ``student``, ``credit``, ``rng``
-and ``feedback`` fixtures reduced to direct calls. Nothing crosses a process,
+Usage (by ``engine_vs_peers.py`` and ``engine_profile.py``): ``python benchmarks/_floor.py
+ASSIGNMENT [--public-only] [--warm K] NOTEBOOK...``. Imports and collection happen
+once; then, for every notebook, its code cells run in a fresh namespace (IPython's
+transformer turns magics into Python, no kernel) and every collected check item runs
+against that namespace through pytest's own per-item protocol, with the ``student``,
+``credit``, ``rng`` and ``feedback`` fixtures reduced to direct calls. Nothing crosses a process,
 nothing is sandboxed, nothing is written: what is left is the student's code and
 the checks' own work, the least any grader must spend. Prints one JSON line:
-the CPU and wall seconds of the per-notebook loop, and each notebook's score.
+the CPU and wall seconds of the per-notebook loop, each notebook's score, and each
+notebook's CPU seconds in its cells and in its checks. With ``--warm K`` the first
+``K`` notebooks run once before the loop and are not counted (the first import of a
+library a notebook uses, which the engine's warm parent has already made).
 """
 
 from __future__ import annotations
@@ -51,6 +54,11 @@ class FloorPlugin:
         self.namespace: dict[str, Any] = {}
         self.scores: list[float] = []
         self.cpu = self.wall = 0.0
+        #: notebooks run first and not measured (``--warm K``)
+        self.warm = 0
+        #: per measured notebook: CPU seconds of its cells, and of its check items
+        self.cells_cpu: list[float] = []
+        self.checks_cpu: list[float] = []
 
     def pytest_configure(self, config: pytest.Config) -> None:
         config.addinivalue_line("markers", "points(n): points awarded by this check item")
@@ -93,40 +101,59 @@ class FloorPlugin:
         sources = [[transform(c.source) for c in nbformat.read(p, as_version=4).cells
                     if c.cell_type == "code"] for p in self.notebooks]
         os.chdir(self.workdir)
+        for cells in sources[:self.warm]:  # unmeasured: first imports of what the cells use
+            self._grade(cells, session)
+        for kept in (self.scores, self.cells_cpu, self.checks_cpu):
+            kept.clear()
         cpu0, wall0 = time.process_time(), time.perf_counter()
-        for cells in sources:
-            self.namespace = {"__name__": "__main__"}
-            for code in cells:
-                try:
-                    exec(compile(code, "<cell>", "exec"), self.namespace)
-                except Exception:
-                    pass  # a cell that raises is skipped, as the engine does
-            plt.close("all")
-            score = 0.0
-            for item in session.items:
-                reports = runtestprotocol(item, nextitem=None, log=False)
-                if all(r.passed for r in reports):
-                    score += item_points(item)
-            self.scores.append(score)
+        for cells in sources[self.warm:]:
+            self._grade(cells, session)
         self.cpu, self.wall = time.process_time() - cpu0, time.perf_counter() - wall0
         return True
+
+    def _grade(self, cells: list[str], session: pytest.Session) -> None:
+        """Run one notebook's cells, then every item; its score and CPU split are kept."""
+        start = time.process_time()
+        self.namespace = {"__name__": "__main__"}
+        for code in cells:
+            try:
+                exec(compile(code, "<cell>", "exec"), self.namespace)
+            except Exception:
+                pass  # a cell that raises is skipped, as the engine does
+        plt.close("all")
+        ran = time.process_time()
+        score = 0.0
+        for item in session.items:
+            reports = runtestprotocol(item, nextitem=None, log=False)
+            if all(r.passed for r in reports):
+                score += item_points(item)
+        self.scores.append(score)
+        self.cells_cpu.append(ran - start)
+        self.checks_cpu.append(time.process_time() - ran)
 
 
 def main(argv: list[str]) -> int:
     public_only = "--public-only" in argv
     args = [a for a in argv if a != "--public-only"]
+    warm = 0
+    if "--warm" in args:  # --warm K: the first K notebooks run once, unmeasured
+        at = args.index("--warm")
+        warm = int(args[at + 1])
+        del args[at:at + 2]
     assignment = load_assignment(Path(args[0]))
     checks = assignment.root / "checks"
     files = sorted((checks / "public").glob("test_*.py"))
     if not public_only:
         files += sorted((checks / "hidden").glob("test_*.py"))
     plugin = FloorPlugin([Path(a).resolve() for a in args[1:]], assignment.root)
+    plugin.warm = warm
     sys.path.insert(0, str(checks / "public"))
     code = pytest.main([str(f) for f in files] + [
         "-c", os.devnull, "--rootdir", str(assignment.root), "--confcutdir", str(assignment.root),
         "-p", "no:cacheprovider", "-p", "no:terminal", "--assert=plain",
         "--import-mode=importlib"], plugins=[plugin])
     print(json.dumps({"cpu": plugin.cpu, "wall": plugin.wall, "scores": plugin.scores,
+                      "cells_cpu": plugin.cells_cpu, "checks_cpu": plugin.checks_cpu,
                       "pytest_exit": int(code)}))
     return 0
 

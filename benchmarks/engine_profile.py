@@ -1,7 +1,7 @@
 """Where one submission's time goes: grade hull submissions with one Grader and time each phase.
 
 Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]
-[--trivial | --released] [--json PATH]``.
+[--trivial | --released [--floor]] [--json PATH]``.
 
 Grades ``count`` submissions (the hull assignment's examples, in turn, or with
 ``--trivial`` the one-cell, one-check assignment of ``engine_vs_peers.py``) with one
@@ -23,11 +23,20 @@ warm worker and is not counted, and times each phase of every submission:
 * sweep: killing the child and sweeping the slot (:func:`autograder.sandbox.reaper.kill_child`
   and :func:`~autograder.sandbox.reaper.sweep_slot`), most of whose wall time is the
   killed child's own exit;
+* child exit, reaping: the worker side's CPU that no phase sees (the child after its
+  last answer, its exit and the freeing of its memory, and the warm parent's work
+  besides its forks), from the warm parent's own and reaped children's CPU over the
+  whole run less what the phases counted, spread evenly over the submissions;
 * other: the rest of ``Grader.grade`` (reading the notebook, results).
 
 For each phase it prints the median wall and CPU milliseconds per submission and
 the phase's share of all CPU (from the means; grader, warm parent and child
-together). With ``--before REF`` (default: the commit before the sweep and scan
+together). With ``--released --floor`` it also runs the bare floor of
+``engine_vs_peers.py`` (``_floor.py``) on the same notebooks in the same order, after
+one unmeasured round of them, and sets each phase beside what the floor spends on it
+(means per submission): the notebook run beside the floor's cells, the checks beside
+its check items, every other phase beside nothing; so the engine's overhead over the
+floor is split by phase. With ``--before REF`` (default: the commit before the sweep and scan
 changes) it also runs the old code of ``REF`` in the same run: the old scan on
 every submission's cells beside the new one (and checks both report the same),
 and the old sweep on every other submission, and prints the ratios old / new.
@@ -42,6 +51,7 @@ the machine, the ratios (taken in one run) less. Not a test: nothing is asserted
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import subprocess
@@ -72,8 +82,12 @@ from autograder.sandbox.cputime import process_cpu_seconds as _stat_cpu_seconds 
 HULL = ROOT / "assignments" / "hull"
 #: the last commit before the sweep (issue 14, issue 9) and scan changes
 BEFORE = "5fc7bef"
+#: the worker side's CPU the phases do not see: the child after its last answer (its exit,
+#: the kernel tearing down its memory) and the warm parent's reaping, from the warm
+#: parent's own and reaped-children time over the run, less what the phases counted
+UNSEEN = "child exit, reaping"
 PHASES = ("static scan", "worker start/sandbox", "notebook run", "pytest session/collection",
-          "checks", "sweep", "other")
+          "checks", "sweep", UNSEEN, "other")
 
 
 class Probe:
@@ -273,8 +287,13 @@ def main() -> None:
                         help="hull submissions written into the released notebook (every cell "
                         "of it, its test cells too), as engine_vs_peers.py grades them, instead "
                         "of the three-cell examples")
+    parser.add_argument("--floor", action="store_true",
+                        help="with --released: the bare floor on the same notebooks, phase by "
+                        "phase beside the engine")
     add_json_option(parser, "engine_profile")
     options = parser.parse_args()
+    if options.floor and not options.released:
+        parser.error("--floor goes with --released (the notebooks engine_vs_peers.py grades)")
 
     before = None if options.no_before else load_before(options.before)
     probes: list[Probe] = [Probe()]
@@ -295,9 +314,12 @@ def main() -> None:
         else:
             folder, examples = HULL, sorted((HULL / "examples").glob("*.ipynb"))
         rows = profile(folder, examples, options.count, probes, old_sweep, scan_pairs)
+        floor = run_floor(folder, examples, options.count) if options.floor else None
     name = ("trivial assignment" if options.trivial else
             "hull, released notebooks" if options.released else "hull")
     figures = report(rows, scan_pairs, before is not None, options.before, name)
+    if floor is not None:
+        figures += beside_floor(rows, floor, before is not None)
     record("engine_profile", figures, path=options.json,
            notes=f"{name}: {options.count} submissions timed with one Grader after one warm-up; "
            "medians per submission (the CPU total and shares from means); CPU = grader + "
@@ -312,12 +334,21 @@ def profile(folder: Path, examples: list[Path], count: int, probes: list[Probe],
     with grader.Grader(load_assignment(folder)) as graded_by:
         graded_by.grade(examples[0])  # warm-up: starts the worker
         scan_pairs.clear()
+        time.sleep(0.2)  # the warm-up's child reaped before the count starts
+        warm = graded_by._slot.warm_parent  # internal: the slot whose children are timed
+        worker_before = _stat_cpu_seconds(warm) if warm else 0.0
         for index in range(count):
             probes.append(Probe())
             wall, cpu = time.perf_counter(), time.process_time()
             graded_by.grade(examples[index % len(examples)])
             rows.append((probes[-1], old_sweep(), time.perf_counter() - wall,
                          time.process_time() - cpu))
+        time.sleep(0.2)  # the warm parent reaps the last child on SIGCHLD
+        if warm and graded_by._slot.warm_parent == warm:
+            seen = sum(sum(p.worker.values()) for p, *_ in rows)
+            unseen = (_stat_cpu_seconds(warm) - worker_before - seen) / count
+            for probe, *_ in rows:  # spread evenly: /proc/<pid>/stat counts 10 ms ticks
+                probe.worker[UNSEEN] = unseen
     return rows
 
 
@@ -375,6 +406,46 @@ def report(rows: list[tuple[Probe, bool, float, float]],
     same = sum(s for _, _, s in scan_pairs)
     print(f"  {'scan wall':11} before {o:8.2f} ms  after {n:8.2f} ms  ratio {_ratio(o, n)}"
           f"  (same report on {same} of {len(scan_pairs)} submissions)")
+    return figures
+
+
+def run_floor(folder: Path, examples: list[Path], count: int) -> dict[str, Any]:
+    """The bare floor over the notebooks :func:`profile` graded, in its order, after one
+    unmeasured round of ``examples`` (as the engine's warm-up and warm parent)."""
+    order = [examples[index % len(examples)] for index in range(count)]
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "_floor.py"), str(folder),
+                           "--warm", str(len(examples)), *map(str, examples + order)],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"the floor failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def beside_floor(rows: list[tuple[Probe, bool, float, float]], floor: dict[str, Any],
+                 compared: bool) -> list[Figure]:
+    """Each phase's mean CPU per submission beside the floor's; the overhead split by phase."""
+    current = [row for row in rows if not (compared and row[1])] or rows
+    engine = {p: 1000 * statistics.fmean(pr.total_cpu(p) for pr, *_ in current) for p in PHASES}
+    theirs = {"notebook run": 1000 * statistics.fmean(floor["cells_cpu"]),
+              "checks": 1000 * statistics.fmean(floor["checks_cpu"])}
+    print("\nbeside the bare floor (_floor.py, the same notebooks; means of CPU ms per "
+          "submission):")
+    print(f"{'phase':28} {'engine':>9} {'floor':>9} {'overhead':>9} {'share':>7}")
+    overhead = sum(engine.values()) - sum(theirs.values())
+    figures = []
+    for phase in PHASES:
+        mine, base = engine[phase], theirs.get(phase, 0.0)
+        share = 100 * (mine - base) / overhead if overhead else 0.0
+        print(f"{phase:28} {mine:9.1f} {base:9.1f} {mine - base:9.1f} {share:6.1f}%")
+        figures += [Figure(f"beside the floor: {phase}: engine CPU", mine, "ms",
+                           "bare floor" if base else None, base if base else None),
+                    Figure(f"beside the floor: {phase}: overhead", mine - base, "ms CPU"),
+                    Figure(f"beside the floor: {phase}: share of the overhead", share, "%")]
+    whole, base = sum(engine.values()), sum(theirs.values())
+    print(f"{'whole submission':28} {whole:9.1f} {base:9.1f} {overhead:9.1f}   "
+          f"({whole / base:.2f}x the floor)")
+    figures.append(Figure("beside the floor: whole submission: engine CPU", whole, "ms",
+                          "bare floor", base))
     return figures
 
 
