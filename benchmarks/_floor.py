@@ -5,8 +5,8 @@ ASSIGNMENT [--public-only] [--warm K] NOTEBOOK...``. Imports and collection happ
 once; then, for every notebook, its code cells run in a fresh namespace (IPython's
 transformer turns magics into Python, no kernel) and every collected check item runs
 against that namespace through pytest's own per-item protocol, with the ``student``,
-``credit``, ``rng`` and ``feedback`` fixtures reduced to direct calls. Nothing crosses a process,
-nothing is sandboxed, nothing is written: what is left is the student's code and
+``credit``, ``rng`` and ``feedback`` fixtures reduced to direct calls. Nothing crosses
+a process, nothing is sandboxed, nothing is written: what is left is the student's code and
 the checks' own work, the least any grader must spend. Prints one JSON line:
 the CPU and wall seconds of the per-notebook loop, each notebook's score, and each
 notebook's CPU seconds in its cells and in its checks. With ``--warm K`` the first

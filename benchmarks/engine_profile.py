@@ -36,8 +36,9 @@ together). With ``--released --floor`` it also runs the bare floor of
 one unmeasured round of them, once before the engine and once after, and sets each
 phase beside what the floor spends on it (means per submission): the notebook run
 beside the floor's cells, the checks beside its check items, every other phase beside
-nothing; so the engine's overhead over the floor is split by phase. With ``--before REF`` (default: the commit before the sweep and scan
-changes) it also runs the old code of ``REF`` in the same run: the old scan on
+nothing; so the engine's overhead over the floor is split by phase. With ``--before
+REF`` (default: the commit before the sweep and scan changes) it also runs the old
+code of ``REF`` in the same run: the old scan on
 every submission's cells beside the new one (and checks both report the same),
 and the old sweep on every other submission, and prints the ratios old / new.
 CPU of the child and the warm parent is read from ``/proc/<pid>/schedstat``
