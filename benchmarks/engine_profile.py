@@ -52,7 +52,6 @@ the machine, the ratios (taken in one run) less. Not a test: nothing is asserted
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -418,13 +417,11 @@ def report(rows: list[tuple[Probe, bool, float, float]],
 def run_floor(folder: Path, examples: list[Path], count: int) -> dict[str, Any]:
     """The bare floor over the notebooks :func:`profile` graded, in its order, after one
     unmeasured round of ``examples`` (as the engine's warm-up and warm parent)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from engine_vs_peers import floor_reports
+
     order = [examples[index % len(examples)] for index in range(count)]
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "_floor.py"), str(folder),
-                           "--warm", str(len(examples)), *map(str, examples + order)],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise SystemExit(f"the floor failed:\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return floor_reports(folder, [examples + order], warm=len(examples))[0]
 
 
 def beside_floor(rows: list[tuple[Probe, bool, float, float]], floor: dict[str, Any],

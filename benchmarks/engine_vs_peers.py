@@ -49,6 +49,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import nbformat
 import psutil
@@ -179,7 +180,18 @@ def run_floor(assignment: Path, notebooks: list[Path], public_only: bool, procs:
     """
     count = len(notebooks)
     shares = [notebooks[k * count // procs:(k + 1) * count // procs] for k in range(procs)]
-    extra = ["--public-only"] if public_only else []
+    reports = floor_reports(assignment, shares, public_only)
+    return Run("bare floor", len(notebooks), max(r["wall"] for r in reports),
+               sum(r["cpu"] for r in reports), 0.0)
+
+
+def floor_reports(assignment: Path, shares: list[list[Path]], public_only: bool = False,
+                  warm: int = 0) -> list[dict[str, Any]]:
+    """One ``_floor.py`` process per non-empty share, all at once; their JSON reports.
+
+    ``warm``: the first notebooks of each share run once, unmeasured (``--warm``).
+    """
+    extra = (["--public-only"] if public_only else []) + (["--warm", str(warm)] if warm else [])
     running = [subprocess.Popen([PYTHON, str(HERE / "_floor.py"), str(assignment), *extra,
                                  *map(str, share)], stdout=subprocess.PIPE, text=True)
                for share in shares if share]
@@ -189,8 +201,7 @@ def run_floor(assignment: Path, notebooks: list[Path], public_only: bool, procs:
         if proc.returncode != 0:
             raise SystemExit(f"floor failed: {out[-2000:]}")
         reports.append(json.loads(out.strip().splitlines()[-1]))
-    return Run("bare floor", len(notebooks), max(r["wall"] for r in reports),
-               sum(r["cpu"] for r in reports), 0.0)
+    return reports
 
 
 def run_engine(assignment: Path, batch: Path, out: Path, jobs: int, public_only: bool,
@@ -474,15 +485,15 @@ def jobs_pairs(batch: Path, notebooks: list[Path], work: Path, rounds: int) -> l
         floor_one = run_floor(HULL, notebooks, False, procs=1)
         floor_two = run_floor(HULL, notebooks, False, procs=2)
         ratios["rate"].append(two.rate / one.rate)
+        steady = ""
         if one.steady_rate and two.steady_rate:
             ratios["steady"].append(two.steady_rate / one.steady_rate)
+            steady = f", steady {ratios['steady'][-1]:.3f}x"
         ratios["floor"].append(floor_two.rate / floor_one.rate)
         if two.first_result is not None:
             firsts.append(two.first_result)
         print(f"  round {k + 1}: --jobs 2 / --jobs 1 {ratios['rate'][-1]:.3f}x submissions/s"
-              + (f", steady {ratios['steady'][-1]:.3f}x" if one.steady_rate and two.steady_rate
-                 else "")
-              + f"; bare floor, 2 processes / 1: {ratios['floor'][-1]:.3f}x", flush=True)
+              f"{steady}; bare floor, 2 processes / 1: {ratios['floor'][-1]:.3f}x", flush=True)
     section = f"hull, every check, {rounds} alternating rounds"
     figures = []
     for key, label in (("rate", "--jobs 2 / --jobs 1, submissions/s"),
