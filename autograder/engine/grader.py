@@ -278,6 +278,24 @@ class Grader:
                                               None), assignment_digest(self.assignment))
         warm_up(self.assignment.rules)
 
+    def sibling(self, worker: GradingSlot) -> "Grader":
+        """A grader of the same assignment and options on ``worker``'s slot, starting with
+        the checks this grader collected; call it in a process forked from this one.
+
+        The pool processes of a ``--jobs N`` batch are forked from the batch's process
+        once slot 0 collected its checks (:mod:`autograder.runners.local`): each then
+        holds a copy of the collected session of its own, and importing the engine and
+        collecting the checks again (about a CPU second per slot) is skipped. This
+        process's copy of this grader's slot is closed without touching the owner's
+        warm parent or folder (:meth:`GradingSlot.disown`); this grader serves nothing
+        after the call.
+        """
+        self._slot.disown()
+        sibling = Grader(self.assignment, self.options, started_slot=worker)
+        sibling._checks, sibling._checks_digest = self._checks, self._checks_digest
+        self._checks = None  # this process's copy: closed with the sibling only
+        return sibling
+
     def warm_copies(self, count: int) -> list[tuple[int, socket.socket]]:
         """Copies of this grader's warm parent for ``count`` other slots of its batch.
 

@@ -338,6 +338,25 @@ class GradingSlot:
                 self._proc.stderr.close()
             self._proc = None
 
+    def disown(self) -> None:
+        """In a process forked from this slot's owner: close this process's copies of the
+        slot's descriptors (its lock, its folder's lock, the warm parent's socket and
+        pipe), leaving the warm parent running and the folder in place: both stay the
+        owner's. The object serves nothing after this (:meth:`shutdown` is a no-op).
+        """
+        self._greeted = False
+        if self._control is not None:
+            self._control.close()
+            self._control = None
+        if self._proc is not None and self._proc.stderr is not None:
+            self._proc.stderr.close()
+        self._proc = None
+        self._copies.clear()
+        self._folder.disown()
+        if self._lock >= 0:
+            os.close(self._lock)
+            self._lock = -1
+
     def shutdown(self) -> None:
         self.close()
         for pid in self._copies:  # our children: their numbers stay theirs until reaped here

@@ -347,6 +347,17 @@ def claimed_elsewhere(previous: SubmissionResult | None, path: Path,
     return os.path.lexists(previous.source) and previous.source not in set(given)
 
 
+class _Bar(tqdm):  # type: ignore[misc]  # tqdm is untyped
+    """tqdm's bar without its monitor thread (which tqdm starts even for a bar it hides).
+
+    The thread only refreshes bars that went quiet, and ours moves with every result;
+    without it, the batch's process runs one thread and can fork the pool's slot
+    processes (see :meth:`autograder.runners.local._PoolFeeder.fork_pool`).
+    """
+
+    monitor_interval = 0
+
+
 def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Path, *,
                 jobs: int | None = None, options: GradingOptions | None = None,
                 progress: bool | None = None,
@@ -395,7 +406,7 @@ def grade_batch(assignment: Assignment, submissions: Sequence[Path], out_dir: Pa
             todo.append(Job(path, ids[path]))
     paths = [p for p in paths if p not in conflicts]
     reused = len(done)
-    bar = tqdm(total=len(paths), initial=reused, unit="nb", desc=assignment.name,
+    bar = _Bar(total=len(paths), initial=reused, unit="nb", desc=assignment.name,
                disable=(not sys.stderr.isatty()) if progress is None else not progress)
     if todo:  # 0% for seconds otherwise: the slots import numpy, scipy and the checks first
         bar.set_postfix_str("starting the grading workers")

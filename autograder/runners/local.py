@@ -3,16 +3,20 @@
 Each slot holds one :class:`Grader` and its warm worker and grades one file at a
 time, writing the result's files itself (same machine, same file system). This
 process is slot 0. Once it has collected its checks, the pool's ``N - 1`` slot
-processes are started (spawned: each imports the engine and collects the checks),
-away from slot 0's core, while slot 0's warm parent imports numpy, matplotlib and
-IPython there; they do not import those again: once slot 0's warm
+processes are forked from it (:meth:`Grader.sibling`): they hold the engine's
+imports and the collected checks from the start, where spawned processes would
+import and collect again (about a CPU second each, on the cores the batch grades
+on). Nor do they import numpy, matplotlib and IPython: once slot 0's warm
 parent is ready, and before its first submission, it forks a copy of itself for
 each of them (:meth:`GradingSlot.warm_copies`), which this process adopts as its
 own child and hands to a pool process (:meth:`GradingSlot.adopt`). So every slot is
 warm about when slot 0 is, and the start-up costs one import of the libraries, not
-``N`` on the same cores. A pool process gets a file only once it is ready and slot
-0 has checked the assignment's requirements; a pool rebuilt after a slot process
-died starts warm parents of its own. Every slot takes the next file when it is free.
+``N``. A pool process gets a file only once it is ready and slot
+0 has checked the assignment's requirements. A pool rebuilt after a slot process
+died, or started by a process that runs threads of its own (a fork copies one
+thread, and a lock another held would stay locked), is spawned instead, away from
+slot 0's core, and its processes start warm parents of their own when the copies
+went to the first pool. Every slot takes the next file when it is free.
 """
 
 from __future__ import annotations
@@ -54,9 +58,10 @@ def grade_one(grader: Grader, path: Path, sub_id: str, out_dir: Path) -> Submiss
                                 title=grader.assignment.title)
 
 
-def _init_slot(assignment_root: str, options: GradingOptions, counter: Any,
+def _init_slot(counter: Any, assignment_root: str, options: GradingOptions,
                copies: Any | None, cores: set[int] | None) -> None:
-    """A pool process's slot: a grader whose warm parent is one of slot 0's copies.
+    """A spawned pool process's slot (a pool rebuilt after a death, or a batch's process
+    that could not fork): it imports the engine and collects the checks itself.
 
     ``copies`` (a queue; None in a pool rebuilt after a death) gives each process
     one item: a copy's pid and control socket, or None when slot 0 made no copy for
@@ -68,19 +73,47 @@ def _init_slot(assignment_root: str, options: GradingOptions, counter: Any,
     if cores is not None:
         with contextlib.suppress(OSError):
             os.sched_setaffinity(0, cores)
-    with counter.get_lock():
-        slot = counter.value
-        counter.value += 1
-    worker = GradingSlot(slot=slot)
-    _GRADER = Grader(load_assignment(Path(assignment_root)), options, started_slot=worker)
-    # A pool process ends through os._exit, which skips atexit: multiprocessing's own
-    # exit finalizers are what run there. Without this the slot's warm worker and its
-    # home folder (``autograder-slot-*``) outlived every ``--jobs N`` run.
-    multiprocessing.util.Finalize(_GRADER, _GRADER.close, exitpriority=10)
+    worker = GradingSlot(slot=_next_slot(counter))
+    _GRADER = _closed_at_exit(Grader(load_assignment(Path(assignment_root)), options,
+                                     started_slot=worker))
     try:
         _GRADER.collect()  # while slot 0's warm parent imports
     except Exception:  # prepare() and grade() meet it again; grade() reports it
         pass
+    _warm(worker, copies)
+
+
+def _init_forked_slot(counter: Any, parent: Grader, copies: Any) -> None:
+    """A pool process forked from the batch's process once slot 0 collected its checks.
+
+    It holds the engine's imports and a copy of the collected checks already
+    (:meth:`Grader.sibling`), where a spawned process would spend about a CPU second
+    importing and collecting them again, on the cores the batch grades on.
+    """
+    global _GRADER
+    worker = GradingSlot(slot=_next_slot(counter))
+    _GRADER = _closed_at_exit(parent.sibling(worker))
+    _warm(worker, copies)
+
+
+def _next_slot(counter: Any) -> int:
+    with counter.get_lock():
+        slot = int(counter.value)
+        counter.value += 1
+    return slot
+
+
+def _closed_at_exit(grader: Grader) -> Grader:
+    # A pool process ends through os._exit, which skips atexit: multiprocessing's own
+    # exit finalizers are what run there. Without this the slot's warm worker and its
+    # home folder (``autograder-slot-*``) outlived every ``--jobs N`` run.
+    multiprocessing.util.Finalize(grader, grader.close, exitpriority=10)
+    return grader
+
+
+def _warm(worker: GradingSlot, copies: Any | None) -> None:
+    """Adopt this process's copy of slot 0's warm parent, if it has one, and get ready."""
+    assert _GRADER is not None
     copy = _wait_for_copy(copies) if copies is not None else None
     if copy is not None:
         worker.adopt(*copy)
@@ -178,8 +211,9 @@ def _grade_beside_pool(grader: Grader, options: GradingOptions, processes: int, 
     try:
         copies: list[tuple[int, socket.socket]] = []
         try:
-            grader.prepare(wait=False)  # this slot's checks first, then the pool's imports:
-            feeder.start()  # beside this slot's warm parent importing (not on its core)
+            grader.prepare(wait=False)  # this slot's checks first, then the pool:
+            feeder.fork_pool(grader)  # forked with them, while no other thread runs
+            feeder.start()  # (or spawned from there, away from this slot's core)
             grader.prepare()
             copies = grader.warm_copies(processes)  # before this slot's first submission
         finally:
@@ -223,9 +257,12 @@ class _PoolFeeder(threading.Thread):
         #: set once slot 0 checked the requirements (or stopped): no job is handed out before
         self.checked = threading.Event()
         self._context = multiprocessing.get_context("spawn")
-        #: slot 0's warm parent copies for the first pool's processes (see :func:`_init_slot`)
+        #: slot 0's warm parent copies for the first pool's processes (see :func:`_warm`)
         self._copies: Any = self._context.Queue()
         self._first_pool = True
+        #: the first pool, when :meth:`fork_pool` started it, and its "ready" calls
+        self._forked: tuple[ProcessPoolExecutor, dict[Future[Any], Job | None]] | None = None
+        self._gave_up = False
 
     def give(self, copies: Sequence[tuple[int, socket.socket]]) -> None:
         """One item per pool process: a warm parent copy, or None (it starts its own)."""
@@ -255,21 +292,38 @@ class _PoolFeeder(threading.Thread):
             self.failure = exc
         self._queue.close()
 
-    def _one_pool(self) -> bool:
-        """Feed one pool until no job is left; True when it broke and is worth rebuilding."""
-        if not self._queue:
-            return False
-        context = self._context
-        # A rebuilt pool starts its own warm parents: the copies were for the first one.
-        copies, self._first_pool = (self._copies if self._first_pool else None), False
+    def fork_pool(self, grader: Grader) -> None:
+        """Start the first pool now, its processes forked from this one with ``grader``'s
+        collected checks (see :func:`_init_forked_slot`); else :meth:`run` spawns it.
+
+        Call it before :meth:`start`, from the batch's thread: a fork copies only the
+        thread that makes it, and a lock another thread held would stay locked in the
+        copy. So this process forks only while no other thread of it runs (a caller
+        with threads of its own, such as a notebook's kernel, gets spawned processes).
+        """
+        if threading.active_count() > 1 or "fork" not in multiprocessing.get_all_start_methods():
+            return
+        context = multiprocessing.get_context("fork")
+        self._forked = self._start_pool(context, _init_forked_slot, (grader, self._copies))
+        self._first_pool = False  # the copies are this pool's; a rebuilt one starts its own
+        # None: the instructor was told; this process's slot grades every file
+        self._gave_up = self._forked is None
+
+    def _start_pool(self, context: Any, initializer: Any, initargs: tuple[Any, ...],
+                    ) -> tuple[ProcessPoolExecutor, dict[Future[Any], Job | None]] | None:
+        """A pool of ``processes`` slot processes, started now, and one "ready" call each;
+        None (and a word to the instructor) when multiprocessing cannot set one up.
+
+        Each process's ``initializer`` gets the slot counter (slot 0 is this process's),
+        then ``initargs``.
+        """
         try:
-            counter = context.Value("i", 1)  # slot 0 is this process's
+            counter = context.Value("i", 1)
             pool = ProcessPoolExecutor(max_workers=self._processes, mp_context=context,
-                                       initializer=_init_slot,
-                                       initargs=(str(self._assignment.root), self._options,
-                                                 counter, copies, self._cores))
+                                       initializer=initializer, initargs=(counter, *initargs))
             try:
                 # A call runs once its process's initializer is done: its answer says "ready".
+                # (With "fork", the first call starts every process, from this thread.)
                 running: dict[Future[Any], Job | None] = {
                     pool.submit(_slot_ready): None for _ in range(self._processes)}
             except BaseException:
@@ -282,7 +336,23 @@ class _PoolFeeder(threading.Thread):
             print(f"autograder: could not start {self._processes} more grading "
                   f"process(es) ({type(exc).__name__}: {exc}); this process grades every "
                   "remaining submission.", file=sys.stderr, flush=True)
-            return False
+            return None
+        return pool, running
+
+    def _one_pool(self) -> bool:
+        """Feed one pool until no job is left; True when it broke and is worth rebuilding."""
+        started, self._forked = self._forked, None
+        if started is None:
+            if self._gave_up or not self._queue:
+                return False
+            # A rebuilt pool starts its own warm parents: the copies were for the first one.
+            copies, self._first_pool = (self._copies if self._first_pool else None), False
+            started = self._start_pool(self._context, _init_slot,
+                                       (str(self._assignment.root), self._options, copies,
+                                        self._cores))
+            if started is None:
+                return False
+        pool, running = started
         with pool:
             broken = ready = False
             while running:

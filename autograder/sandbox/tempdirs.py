@@ -41,6 +41,17 @@ class OwnedFolder:
         fcntl.flock(self._fd, fcntl.LOCK_EX)
         remove_abandoned(self.path.parent, prefix=prefix)
 
+    def disown(self) -> None:
+        """In a process forked from the owner: close this process's copy of the lock.
+
+        The lock is the open file's (``flock``), shared with the copy a fork makes, so
+        a forked process that kept it would hold the folder as long as it lives. The
+        owner keeps the folder and its lock; :meth:`remove` does nothing after this.
+        """
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
     def remove(self) -> None:
         """Remove the folder, then let go of its lock (safe to call twice)."""
         if self._fd < 0:

@@ -32,6 +32,7 @@ from autograder.engine.slot import GradingSlot
 from autograder.runners import local
 from autograder.sandbox.pidfd import pidfds_supported
 from tests.support import envs
+from tests.support.pool import pool_processes, slot_zero_waits
 
 ROOT = Path(__file__).resolve().parents[2]
 HULL = ROOT / "assignments" / "hull"
@@ -144,20 +145,13 @@ def test_pool_slots_grade_on_copies_and_leave_nothing(tmp_path: Path,
     monkeypatch.setattr(GradingSlot, "warm_copies", recorded)
     seen: dict[str, Any] = {}
     pool_reported = threading.Event()
-    grade_here = local.grade_one
-
-    def grade_after_the_pool(*args: Any, **kwargs: Any) -> Any:
-        pool_reported.wait(timeout=600)  # so the pool grades a file however fast this slot is
-        return grade_here(*args, **kwargs)
-
-    monkeypatch.setattr(local, "grade_one", grade_after_the_pool)
+    monkeypatch.setattr(local, "grade_one", slot_zero_waits(pool_reported, local.grade_one))
 
     def look(result: Any) -> None:
         # A result the pool graded (reported from the feeder thread): its process holds no
         # warm parent of its own, and the copy is this process's child.
         if not seen and threading.current_thread() is not threading.main_thread():
-            pool = [p for p in psutil.Process().children() if "spawn_main" in " ".join(p.cmdline())]
-            seen["pool_workers"] = [c.pid for p in pool for c in p.children()
+            seen["pool_workers"] = [c.pid for p in pool_processes() for c in p.children()
                                     if "autograder.worker" in " ".join(c.cmdline())]
             seen["ours"] = [c.pid for c in psutil.Process().children()
                             if "autograder.worker" in " ".join(c.cmdline())]
