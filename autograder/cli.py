@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import os
 import sys
 from pathlib import Path
@@ -461,5 +462,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
 
+def run() -> None:
+    """The ``autograder`` command (and ``python -m autograder``): :func:`main`, then exit.
+
+    Before the interpreter ends, every object it holds (pytest's session, the modules
+    of numpy, scipy and the engine) moves out of the cyclic collector's reach
+    (``gc.freeze``): the collections of the interpreter's own shutdown then skip them,
+    which took 0.15-0.2 s at the end of each command (``autograder grade`` on one
+    core: 0.17-0.30 s from the end of ``main`` to the end of the process, 0.07-0.09 s
+    with the freeze). Module teardown, ``atexit`` handlers and reference-counted
+    finalizers still run; nothing of the engine waits for a cycle to be collected at
+    exit (slots, pools and files are closed by ``main`` itself). :func:`main` leaves
+    the process as it found it, for callers that run it in theirs.
+    """
+    code = main()
+    gc.freeze()
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

@@ -131,3 +131,33 @@ def test_grade_check_and_validate_start_the_warm_parent_before_importing_the_eng
     assert validated["launches"] == [[]], validated
     assert "template" in str(validated["stdout"]), validated
     assert not list(scratch.glob("autograder-slot-*")), "a slot folder was left behind"
+
+
+EXIT_PROBE = """
+import atexit, gc, sys
+atexit.register(lambda: print(f"frozen={{gc.get_freeze_count()}}", file=sys.stderr))
+from autograder.cli import {entry}
+sys.argv = ["autograder", "grade", "no-such-assignment", "nothing", "--out", "out"]
+{call}
+"""
+
+
+@pytest.mark.parametrize("entry, call, frozen", [
+    ("run", "run()", True),  # the command: its objects leave the collector's reach at exit
+    ("main", "code = main()", False),  # a caller's own process is left as it was
+])
+def test_the_command_exits_without_walking_its_objects_and_keeps_the_status(
+        tmp_path: Path, entry: str, call: str, frozen: bool) -> None:
+    proc = subprocess.run([sys.executable, "-c", EXIT_PROBE.format(entry=entry, call=call)],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert ("frozen=0" not in proc.stderr) is frozen, proc.stderr[-2000:]
+    assert "no-such-assignment" in proc.stderr
+    if frozen:
+        assert proc.returncode == 2  # main's status for a usage error, through run()
+
+
+def test_the_installed_command_is_run() -> None:
+    from importlib.metadata import entry_points
+
+    command = [e for e in entry_points(group="console_scripts") if e.name == "autograder"]
+    assert [e.value for e in command] == ["autograder.cli:run"]
