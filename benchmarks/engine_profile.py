@@ -303,12 +303,10 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="bench-profile-") as tmp:
         if options.trivial:
-            sys.path.insert(0, str(ROOT / "benchmarks"))
             from engine_vs_peers import write_trivial
             folder, batch = write_trivial(Path(tmp), 2)
             examples = sorted(batch.glob("*.ipynb"))
         elif options.released:
-            sys.path.insert(0, str(ROOT / "benchmarks"))
             from grade_vs_nbgrader import build_batch
             folder, examples = HULL, build_batch(Path(tmp) / "submitted", 6)
         else:
@@ -417,7 +415,6 @@ def report(rows: list[tuple[Probe, bool, float, float]],
 def run_floor(folder: Path, examples: list[Path], count: int) -> dict[str, Any]:
     """The bare floor over the notebooks :func:`profile` graded, in its order, after one
     unmeasured round of ``examples`` (as the engine's warm-up and warm parent)."""
-    sys.path.insert(0, str(ROOT / "benchmarks"))
     from engine_vs_peers import floor_reports
 
     order = [examples[index % len(examples)] for index in range(count)]
