@@ -24,7 +24,8 @@ import psutil
 import pytest
 
 from autograder import api
-from autograder.engine.slot import GradingSlot, claim_slot
+from autograder.engine.slot import GradingSlot, slot_lock_dir
+from autograder.sandbox.tempdirs import LOCK_NAME
 from autograder.results.model import SubmissionResult
 from autograder.runners import local
 from tests.support.pool import pool_processes, slot_zero_waits
@@ -236,13 +237,19 @@ def test_a_forked_copy_of_a_slot_lets_go_of_it_and_leaves_its_worker(
             # The copy touched neither the owner's warm parent nor its folder...
             assert warm is not None and slot.warm_parent == warm
             assert slot.work_root.is_dir()
-            number, home = slot.slot, slot.work_root.parent
+            home = slot.work_root.parent
+            control = slot._control  # internal: the warm parent's socket
+            assert control is not None
+            held = {str(slot_lock_dir() / f"{slot.slot}.lock"), str(home / LOCK_NAME),
+                    f"socket:[{os.fstat(control.fileno()).st_ino}]"}
+            # ...and holds none of the slot's descriptors: not its lock nor its folder's
+            # (each an flock, the open file's, which the copy would otherwise hold as
+            # long as it lives), nor the warm parent's socket. Read from the copy's own
+            # descriptor table: another grader on this machine may claim a free slot.
+            copy_holds = {os.readlink(f"/proc/{pid}/fd/{fd}")
+                          for fd in os.listdir(f"/proc/{pid}/fd")}
+            assert not held & copy_holds
             slot.shutdown()
-            # ...and let go of the slot's lock, which is the open file's (flock) and would
-            # otherwise be held by the copy as long as it lives.
-            again, lock = claim_slot(number)
-            os.close(lock)
-            assert again == number
             assert not home.exists()
         finally:
             os.kill(pid, signal.SIGKILL)
