@@ -264,12 +264,23 @@ def _options(args: argparse.Namespace) -> GradingOptions:
 
 def _slot_started_early(wanted: bool) -> contextlib.AbstractContextManager[GradingSlot | None]:
     """A warm parent started before the engine's imports (see ``slot.start_early``);
-    the slot's own context shuts it down at the end of the command."""
+    the slot's own context shuts it down at the end of the command.
+
+    The note on missing protections follows the launch: probing the machine imports the
+    sandbox's libraries, which the warm parent need not wait for.
+    """
     if not wanted:
+        _say_missing_protections()
         return contextlib.nullcontext()
     from autograder.engine.slot import start_early
 
-    return start_early()
+    started = start_early()
+    try:
+        _say_missing_protections()
+    except BaseException:
+        started.shutdown()
+        raise
+    return started
 
 
 def _grade(args: argparse.Namespace) -> int:
@@ -446,7 +457,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "new": _new, "validate": _validate,
                 "serve": _serve, "roster": _roster, "submit": _submit,
                 "merge": _merge, "worker": _worker}
-    if args.command in ("grade", "check", "serve", "validate", "worker"):
+    if args.command in ("serve", "worker"):  # grade, check and validate: see _slot_started_early
         _say_missing_protections()
     try:
         return handlers[args.command](args)

@@ -26,12 +26,16 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from autograder.boundary import frames
 from autograder.errors import AutograderError, ProtocolError
 from autograder.sandbox import affinity, kernel
 from autograder.sandbox.pidfd import pidfd_kill, pidfd_open, pidfds_supported
-from autograder.sandbox.reaper import kill_descendants
 from autograder.sandbox.tempdirs import OwnedFolder
+
+# Not imported here: the frame codec (numpy) and the reaper (the sandbox's probes, whose
+# seccomp binding runs ``ldconfig`` twice as it loads) take about 0.1 s, and
+# :func:`start_early` launches the warm parent before either is needed, so that the
+# warm parent's own imports, which come before the first result, start that much sooner.
+# Each method below imports what it uses; later imports find them loaded.
 
 #: how long the warm parent may take to import numpy, scipy and matplotlib (our own
 #: process, not student code: generous, so a loaded machine is slow but never wrong)
@@ -214,6 +218,8 @@ class GradingSlot:
         self._greeted = False
 
     def _greet(self) -> None:
+        from autograder.boundary import frames
+
         assert self._control is not None
         try:
             hello = frames.recv_message(self._control, timeout=STARTUP_TIMEOUT)
@@ -237,6 +243,8 @@ class GradingSlot:
 
     def spawn(self, request: dict[str, Any]) -> tuple[int, socket.socket]:
         """Fork a child for ``request``; return its pid and the grader's socket end."""
+        from autograder.boundary import frames
+
         for attempt in (1, 2):
             self.start()
             ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -267,6 +275,8 @@ class GradingSlot:
         it before). Fewer copies, or none, when the kernel has no pidfds or a copy
         fails: the slots left start their own warm parents.
         """
+        from autograder.boundary import frames
+
         copies: list[tuple[int, socket.socket]] = []
         if count <= 0 or not pidfds_supported():
             return copies
@@ -331,6 +341,8 @@ class GradingSlot:
         if self._proc is not None:
             if self._proc.poll() is None:
                 if os.geteuid() != 0:  # orphans it adopted would go to init with it
+                    from autograder.sandbox.reaper import kill_descendants
+
                     kill_descendants(self._proc.pid)
                 self._proc.kill()
             self._proc.wait()

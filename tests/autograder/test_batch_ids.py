@@ -120,8 +120,8 @@ def test_results_round_trip_in_gradescope_format(tmp_path: Path) -> None:
     assert not list((tmp_path / "alice").glob(".*.tmp"))
 
 
-def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.MonkeyPatch,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_missing_protections_are_said_once_after_the_launch_before_grading(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     from autograder import cli
     from autograder.sandbox.support import IsolationSupport
 
@@ -129,9 +129,33 @@ def test_missing_protections_are_said_once_before_grading(monkeypatch: pytest.Mo
     monkeypatch.setattr("autograder.sandbox.support.probe_support",
                         lambda: IsolationSupport(landlock_abi=0, is_root=True,
                                                  can_unshare_net=True, notes=(note,)))
-    monkeypatch.setattr(cli, "_check", lambda args: 0)
-    assert cli.main(["check", "x.ipynb"]) == 0
+    events: list[str] = []
+
+    class Started:  # what slot.start_early returns: the warm parent launched
+        def __enter__(self) -> None:
+            return None
+
+        def __exit__(self, *exc: object) -> None:
+            events.append("shut down")
+
+    def start_early(**kwargs: object) -> Started:
+        events.append("launched")
+        return Started()
+
+    real_print = print
+
+    def noting(*args: object, **kwargs: object) -> None:
+        if args and note in str(args[0]):
+            events.append("note")
+        real_print(*args, **kwargs)  # type: ignore[call-overload]
+
+    monkeypatch.setattr("autograder.engine.slot.start_early", start_early)
+    monkeypatch.setattr(cli, "print", noting, raising=False)
+    monkeypatch.setattr("autograder.api.check", lambda *a, **kw: (_ for _ in ()).throw(
+        cli.UsageError("stop here")))
+    assert cli.main(["check", "x.ipynb"]) == 2
     assert capsys.readouterr().err.count(note) == 1
+    assert events == ["launched", "note", "shut down"], events
 
 
 # -- the class folder and shards, end to end (local backend, public checks only) ----------------

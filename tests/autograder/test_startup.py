@@ -84,7 +84,8 @@ EARLY = """
 import json, sys
 from autograder.engine import slot
 from autograder.cli import main
-engine = ("pytest", "nbformat", "autograder.engine.grader", "autograder.engine.checkrun", "reference")
+engine = ("pytest", "nbformat", "autograder.engine.grader", "autograder.engine.checkrun", "reference",
+          "numpy", "pyseccomp", "autograder.boundary.codec", "autograder.sandbox.reaper")
 launches = []
 launch = slot.GradingSlot._launch
 def recording(self):
@@ -101,8 +102,10 @@ print(json.dumps({"code": code, "launches": launches}), file=sys.stderr)
 
 def test_grade_check_and_validate_start_the_warm_parent_before_importing_the_engine(
         tmp_path: Path) -> None:
-    """The warm parent's imports run beside the grader's (``slot.start_early``); a run
-    that grades nothing, or fails, leaves neither its slot folder nor its process."""
+    """The warm parent's imports run beside the grader's (``slot.start_early``): it is
+    launched before the engine, numpy (the frame codec's) and the sandbox's libraries are
+    imported. A run that grades nothing, or fails, leaves neither its slot folder nor
+    its process."""
     folder = write_double(tmp_path, "double", {"test_double.py": CHECK})
     notebook = submission(tmp_path / "submitted", "alice", RIGHT)
     scratch = tmp_path / "scratch"
