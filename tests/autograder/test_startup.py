@@ -164,3 +164,23 @@ def test_the_installed_command_is_run() -> None:
 
     command = [e for e in entry_points(group="console_scripts") if e.name == "autograder"]
     assert [e.value for e in command] == ["autograder.cli:run"]
+
+
+def test_the_warm_parents_children_collect_as_a_fresh_interpreter_does(tmp_path: Path) -> None:
+    """The warm parent starts with a higher threshold for the cyclic collector (fewer
+    collections during its imports); a submission's child runs with the default."""
+    from autograder.engine.assignment import load_assignment
+    from autograder.engine.grader import Grader
+    from autograder.worker.__main__ import STARTUP_GC_THRESHOLDS
+
+    fresh = subprocess.run([sys.executable, "-c", "import gc; print(list(gc.get_threshold()))"],
+                           capture_output=True, text=True, check=True, timeout=120).stdout
+    assert json.loads(fresh) != list(STARTUP_GC_THRESHOLDS)
+    check = ("def test_double(student):\n"
+             f"    assert student.thresholds() == {json.loads(fresh)!r}\n")
+    folder = write_double(tmp_path, "double", {"test_double.py": check})
+    code = RIGHT + "import gc\n\ndef thresholds():\n    return list(gc.get_threshold())\n"
+    notebook = submission(tmp_path / "in", "s", code)
+    with Grader(load_assignment(folder)) as grader:
+        result = grader.grade(notebook)
+    assert result.score == 1.0, [t.output for t in result.tests]
