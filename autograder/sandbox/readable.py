@@ -251,8 +251,10 @@ def _distribution_names(packages: Sequence[str]) -> set[str]:
                     for f in dist.files or () if f.suffix == ".py"}
         else:
             continue
+        if not tops & wanted:  # before the name: reading it parses the whole METADATA file
+            continue
         name = dist.metadata["Name"]
-        if tops & wanted and name:
+        if name:
             names.add(_normalise(name))
     return names
 
