@@ -1,6 +1,6 @@
 """Where one submission's time goes: grade hull submissions with one Grader and time each phase.
 
-Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF | --no-before]
+Usage: ``python benchmarks/engine_profile.py [--count 24] [--before REF]
 [--trivial | --released [--floor]] [--json PATH]``.
 
 Grades ``count`` submissions (the hull assignment's examples, in turn, or with
@@ -37,8 +37,9 @@ one unmeasured round of them, once before the engine and once after, and sets ea
 phase beside what the floor spends on it (means per submission): the notebook run
 beside the floor's cells, the checks beside its check items, every other phase beside
 nothing; so the engine's overhead over the floor is split by phase. With ``--before
-REF`` (default: the commit before the sweep and scan changes) it also runs the old
-code of ``REF`` in the same run: the old scan on
+REF`` (such as 5fc7bef, the commit before the sweep and scan changes, whose modules
+the engine of that time can still import) it also runs the old code of ``REF`` in
+the same run: the old scan on
 every submission's cells beside the new one (and checks both report the same),
 and the old sweep on every other submission, and prints the ratios old / new.
 CPU of the child and the warm parent is read from ``/proc/<pid>/schedstat``
@@ -80,8 +81,6 @@ from autograder.engine.assignment import load_assignment  # noqa: E402
 from autograder.sandbox.cputime import process_cpu_seconds as _stat_cpu_seconds  # noqa: E402
 
 HULL = ROOT / "assignments" / "hull"
-#: the last commit before the sweep (issue 14, issue 9) and scan changes
-BEFORE = "5fc7bef"
 #: the worker side's CPU the phases do not see: the child after its last answer (its exit,
 #: the kernel tearing down its memory) and the warm parent's reaping, from the warm
 #: parent's own and reaped-children time over the run, less what the phases counted
@@ -153,7 +152,12 @@ def load_before(ref: str) -> dict[str, types.ModuleType] | None:
             return None
         module = types.ModuleType(f"before_{name}")
         sys.modules[module.__name__] = module  # dataclasses look their module up
-        exec(compile(shown.stdout, f"{ref}:autograder/{name}.py", "exec"), module.__dict__)
+        try:
+            exec(compile(shown.stdout, f"{ref}:autograder/{name}.py", "exec"), module.__dict__)
+        except ImportError as exc:  # it imports modules the engine has since moved
+            print(f"(no old code path: {ref}:autograder/{name}.py cannot be loaded beside "
+                  f"this engine: {exc})")
+            return None
         modules[name] = module
     modules["session"].cgroups = modules["cgroups"]
     return modules
@@ -276,10 +280,11 @@ def median_ms(values: list[float]) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", type=int, default=24, help="submissions to time (default 24)")
-    parser.add_argument("--before", default=BEFORE,
-                        help="git revision whose scan and sweep to compare with "
-                        f"(default {BEFORE})")
-    parser.add_argument("--no-before", action="store_true", help="time this code only")
+    parser.add_argument("--before", default=None,
+                        help="git revision whose scan and sweep to compare with (default: "
+                        "none, this code only)")
+    parser.add_argument("--no-before", action="store_true",
+                        help="time this code only (the default; kept for old command lines)")
     parser.add_argument("--trivial", action="store_true",
                         help="profile the one-cell, one-check assignment of engine_vs_peers.py "
                         "instead of hull (the engine's own overhead)")
@@ -295,7 +300,7 @@ def main() -> None:
     if options.floor and not options.released:
         parser.error("--floor goes with --released (the notebooks engine_vs_peers.py grades)")
 
-    before = None if options.no_before else load_before(options.before)
+    before = None if options.no_before or not options.before else load_before(options.before)
     probes: list[Probe] = [Probe()]
     scan_pairs: list[tuple[float, float, bool]] = []
     old_sweep = lambda: len(probes) % 2 == 0  # noqa: E731 - every other submission
