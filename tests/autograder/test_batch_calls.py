@@ -276,13 +276,20 @@ def peer_session(sock: socket.socket) -> Student:
 
 
 def against(peer: Any, count: int = 3) -> list[Verdict]:
-    """The verdicts of ``student.map("f", [(0,), ...])`` against ``peer(sock)``; fails
-    the test if the grader is still waiting after a minute."""
+    """The verdicts of ``student.map("f", [(0,), ...])`` against ``peer(sock, stop)``;
+    fails the test if the grader is still waiting after a minute.
+
+    The peer's end is the peer's to close: closed here, under a peer still writing, its
+    descriptor number could meanwhile belong to another file. ``stop`` is set once the
+    grader is done with it.
+    """
     ours, theirs = socket.socketpair()
     box: dict[str, Any] = {}
-    with ours, theirs:
+    stop = threading.Event()
+    peer_thread = threading.Thread(target=peer, args=(theirs, stop), daemon=True)
+    with ours:
         student = peer_session(ours)
-        threading.Thread(target=peer, args=(theirs,), daemon=True).start()
+        peer_thread.start()
 
         def grade() -> None:
             try:
@@ -295,19 +302,25 @@ def against(peer: Any, count: int = 3) -> list[Verdict]:
         thread.start()
         thread.join(60)
         assert not thread.is_alive(), "the grader hung on a peer that lies"
+    stop.set()
+    peer_thread.join(30)
     assert "error" not in box, box["error"]
     return box["verdicts"]
 
 
 def honest_then(tail: list[Any]) -> Any:
     """A peer that reads the batch, then writes ``tail`` (frames, or raw bytes)."""
-    def peer(sock: socket.socket) -> None:
-        request = frames.recv_message(sock)
-        batch = request["batch"]  # type: ignore[index]
-        for value in tail:
-            data = value(batch) if callable(value) else value
-            sock.sendall(data if isinstance(data, bytes) else frame(data))
-        time.sleep(30)
+    def peer(sock: socket.socket, stop: threading.Event) -> None:
+        with sock:
+            try:
+                request = frames.recv_message(sock)
+                batch = request["batch"]  # type: ignore[index]
+                for value in tail:
+                    data = value(batch) if callable(value) else value
+                    sock.sendall(data if isinstance(data, bytes) else frame(data))
+            except (OSError, EOFError):  # the grader closed its end: done with this peer
+                return
+            stop.wait(30)  # silent, the socket open, until the grader is done
     return peer
 
 
