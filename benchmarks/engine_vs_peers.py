@@ -21,7 +21,9 @@ What it prints (each figure is one run over the batch, but for ``--pairs``):
   (what one more submission costs, and the rate of a long batch);
 * with ``--pairs K``, the two-core speed-up made resolvable: ``K`` alternating rounds of
   ``--jobs 1`` and ``--jobs 2`` over the hull batch with every check (the median of
-  the ``K`` ratios of submissions/s, and of the steady rates, first result to last),
+  the ``K`` ratios of submissions/s, and of the steady rates, first result to last;
+  the seconds outside that stretch, start-up and end, and the whole-run ratio they
+  would leave even with a perfect 2x steady rate),
   beside the same rounds of the bare floor on one process and on two: what two
   cores give the per-submission work itself on this machine, with no start-up and
   nothing of the engine.
@@ -477,8 +479,9 @@ def jobs_pairs(batch: Path, notebooks: list[Path], work: Path, rounds: int) -> l
     count = len(notebooks)
     print_header(f"hull, {count} submissions, every check: {rounds} alternating rounds, "
                  "two cores against one")
-    ratios: dict[str, list[float]] = {"rate": [], "steady": [], "floor": []}
+    ratios: dict[str, list[float]] = {"rate": [], "steady": [], "floor": [], "ceiling": []}
     firsts: list[float] = []
+    serial: dict[int, list[float]] = {1: [], 2: []}
     for k in range(rounds):
         one = print_row(run_engine(HULL, batch, work / f"pair-{k}-1", 1, False, count))
         two = print_row(run_engine(HULL, batch, work / f"pair-{k}-2", 2, False, count))
@@ -489,6 +492,15 @@ def jobs_pairs(batch: Path, notebooks: list[Path], work: Path, rounds: int) -> l
         if one.steady_rate and two.steady_rate:
             ratios["steady"].append(two.steady_rate / one.steady_rate)
             steady = f", steady {ratios['steady'][-1]:.3f}x"
+            # The part of each run outside its steady stretch (first result to last): the
+            # start-up before the first result and the end after the last, which one slot
+            # or two pay alike. With them, even a perfect 2x steady rate gives the whole
+            # run less than 2x: that bound is the ceiling printed beside the ratio.
+            for jobs, run in ((1, one), (2, two)):
+                serial[jobs].append(run.wall - (count - 1) / run.steady_rate)
+            ratios["ceiling"].append(one.wall / (serial[2][-1] + (one.wall - serial[1][-1]) / 2))
+            steady += (f"; start-up and end {serial[1][-1]:.2f} s / {serial[2][-1]:.2f} s, "
+                       f"so a perfect 2x steady rate would give {ratios['ceiling'][-1]:.3f}x")
         ratios["floor"].append(floor_two.rate / floor_one.rate)
         if two.first_result is not None:
             firsts.append(two.first_result)
@@ -498,7 +510,9 @@ def jobs_pairs(batch: Path, notebooks: list[Path], work: Path, rounds: int) -> l
     figures = []
     for key, label in (("rate", "--jobs 2 / --jobs 1, submissions/s"),
                        ("steady", "--jobs 2 / --jobs 1, steady rate"),
-                       ("floor", "bare floor, 2 processes / 1, submissions/s")):
+                       ("floor", "bare floor, 2 processes / 1, submissions/s"),
+                       ("ceiling", "--jobs 2 / --jobs 1 with a perfect 2x steady rate "
+                                   "(the same start-up and end)")):
         if ratios[key]:
             middle = statistics.median(ratios[key])
             spread = f"{min(ratios[key]):.3f}-{max(ratios[key]):.3f}"
@@ -509,6 +523,12 @@ def jobs_pairs(batch: Path, notebooks: list[Path], work: Path, rounds: int) -> l
     if firsts:
         figures.append(Figure(f"{section}: --jobs 2: first result, median",
                               statistics.median(firsts), "s"))
+    for jobs, seconds in serial.items():
+        if seconds:
+            print(f"  median start-up and end (outside first result to last), --jobs {jobs}: "
+                  f"{statistics.median(seconds):.2f} s", flush=True)
+            figures.append(Figure(f"{section}: --jobs {jobs}: start-up and end, median",
+                                  statistics.median(seconds), "s"))
     return figures
 
 
