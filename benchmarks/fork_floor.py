@@ -16,6 +16,13 @@ fork of
   without and then with ``gc.freeze()`` in the parent before the fork (what the
   worker does: the child's full garbage collections then skip, and so neither walk
   nor copy on write, every object the parent made),
+* the warm parent whose child runs the hull solution's code cells
+  (``assignments/hull/examples/solution.ipynb``) twice: the first run is what a
+  submission's notebook costs in a fresh fork, the second, in the same child, what
+  the same cells cost once the pages they touch are the child's own (the bare
+  floor's case: a warm process that ran them before); with the minor page faults of
+  each run, the copies on write of the parent's pages among them; once with the
+  parent in 4 KiB pages and once after the collapse into huge pages below,
 * the warm parent after :func:`autograder.worker.hugepages.collapse` (what the worker
   does once it has forked 50 children), bare and with one cell: the fork copies one
   page-table entry per 2 MiB instead of per 4 KiB where its heap could be collapsed,
@@ -31,8 +38,10 @@ import argparse
 import gc
 import os
 import resource
+import statistics
 import sys
 import time
+from pathlib import Path
 from typing import Callable
 
 from _record import Figure, add_json_option, record
@@ -63,6 +72,42 @@ def forks(count: int, body: Callable[[], object]) -> tuple[float, float, float]:
     return (1000 * (_cpu(resource.RUSAGE_SELF) - parent) / count,
             1000 * (_cpu(resource.RUSAGE_CHILDREN) - child) / count,
             1000 * (time.perf_counter() - wall) / count)
+
+
+def cells_twice(count: int, shell: object, cells: list[str], folder: Path,
+                ) -> list[tuple[float, float, float, float]]:
+    """Per fork: the child's CPU ms and minor page faults running ``cells`` in ``shell``
+    (an IPython shell made before the fork), then the same running them again."""
+    rows = []
+    for _ in range(count):
+        reader, writer = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            try:
+                os.close(reader)
+                os.chdir(folder)  # the notebook reads its data relative to its folder
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, 1)
+                os.dup2(null, 2)
+                sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115
+                found = []
+                for _run in range(2):
+                    before = time.process_time(), resource.getrusage(resource.RUSAGE_SELF)
+                    for source in cells:
+                        shell.run_cell(source, store_history=False)  # type: ignore[attr-defined]
+                    after = time.process_time(), resource.getrusage(resource.RUSAGE_SELF)
+                    found += [1000 * (after[0] - before[0]),
+                              float(after[1].ru_minflt - before[1].ru_minflt)]
+                os.write(writer, " ".join(map(str, found)).encode())
+            finally:
+                os._exit(0)
+        os.close(writer)
+        with os.fdopen(reader, "rb") as answer:
+            said = answer.read().split()
+        os.waitpid(pid, 0)
+        first_ms, first_faults, again_ms, again_faults = map(float, said)
+        rows.append((first_ms, first_faults, again_ms, again_faults))
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,7 +146,17 @@ def main(argv: list[str] | None = None) -> int:
     gc.freeze()
     rows.append(("  the same after gc.freeze()", _rss_mib(), forks(
         max(1, args.count // 4), lambda: shell.run_cell(allocate, store_history=False))))
+    import nbformat
+
+    hull = Path(__file__).resolve().parent.parent / "assignments" / "hull"
+    book = nbformat.read(hull / "examples" / "solution.ipynb", as_version=4)
+    runs = cells_twice(max(1, args.count // 4), shell,
+                       [c.source for c in book.cells if c.cell_type == "code"], hull)
+    twice = [statistics.median(run[k] for run in runs) for k in range(4)]
     collapsed = hugepages.collapse()
+    runs_huge = cells_twice(max(1, args.count // 4), shell,
+                            [c.source for c in book.cells if c.cell_type == "code"], hull)
+    twice_huge = [statistics.median(run[k] for run in runs_huge) for k in range(4)]
     rows.append(("warm parent in huge pages", _rss_mib(), forks(args.count, lambda: None)))
     rows.append(("  child runs one cell", _rss_mib(), forks(
         args.count, lambda: shell.run_cell("def double(x):\n    return 2 * x\n",
@@ -110,13 +165,31 @@ def main(argv: list[str] | None = None) -> int:
     for label, rss, (parent, child, wall) in rows:
         print(f"  {label:<34} {rss:8.1f} {parent:7.1f} {child:7.1f} {parent + child:7.1f} "
               f"{wall:7.1f} {(parent + child) / bare:9.1f}x", flush=True)
+    for where, (first, faults, again, again_faults) in (("", twice),
+                                                         (", parent in huge pages", twice_huge)):
+        extra = max(1.0, faults - again_faults)
+        print(f"hull solution's cells in the child{where} (medians of {len(runs)} forks): "
+              f"first run {first:.1f} ms CPU, {faults:.0f} minor faults; again in the same "
+              f"child {again:.1f} ms, {again_faults:.0f} faults: the fresh fork costs "
+              f"{first - again:.1f} ms more ({(first - again) * 1000 / extra:.1f} us per "
+              "extra fault)")
     plain, frozen = sum(rows[3][2][:2]), sum(rows[4][2][:2])
     print(f"ratio allocating cell, without / with gc.freeze(): {plain / frozen:.2f}x CPU")
     print(f"huge pages: {collapsed / (1 << 20):.0f} MiB collapsed "
           f"(autograder.worker.hugepages, after the warm parent's 50th child); "
           f"ratio warm parent, 4 KiB / huge pages: {sum(rows[1][2][:2]) / sum(rows[5][2][:2]):.2f}x "
           f"bare child, {sum(rows[2][2][:2]) / sum(rows[6][2][:2]):.2f}x with one cell")
-    record("fork_floor", figures(rows, collapsed), path=args.json,
+    found = figures(rows, collapsed) + [
+        Figure("hull solution's cells, first run in the child: CPU", twice[0], "ms",
+               "again in the same child", twice[2]),
+        Figure("hull solution's cells, first run in the child: minor faults", twice[1],
+               "faults", "again in the same child", twice[3]),
+        Figure("hull solution's cells, first run in the child, parent in huge pages: CPU",
+               twice_huge[0], "ms", "again in the same child", twice_huge[2]),
+        Figure("hull solution's cells, first run in the child, parent in huge pages: "
+               "minor faults", twice_huge[1], "faults", "again in the same child",
+               twice_huge[3])]
+    record("fork_floor", found, path=args.json,
            notes=f"{args.count} forks per line ({max(1, args.count // 4)} for the allocating "
            "cell); ms of CPU per fork, the parent's share (fork) and the child's (to its exit).")
     return 0
