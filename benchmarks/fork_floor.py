@@ -105,6 +105,9 @@ def cells_twice(count: int, shell: object, cells: list[str], folder: Path,
         with os.fdopen(reader, "rb") as answer:
             said = answer.read().split()
         os.waitpid(pid, 0)
+        if len(said) != 4:
+            raise SystemExit("fork_floor: the child that runs the hull solution's cells died "
+                             "before it reported; run the solution notebook on its own to see why")
         first_ms, first_faults, again_ms, again_faults = map(float, said)
         rows.append((first_ms, first_faults, again_ms, again_faults))
     return rows
@@ -150,12 +153,11 @@ def main(argv: list[str] | None = None) -> int:
 
     hull = Path(__file__).resolve().parent.parent / "assignments" / "hull"
     book = nbformat.read(hull / "examples" / "solution.ipynb", as_version=4)
-    runs = cells_twice(max(1, args.count // 4), shell,
-                       [c.source for c in book.cells if c.cell_type == "code"], hull)
+    code = [cell.source for cell in book.cells if cell.cell_type == "code"]
+    runs = cells_twice(max(1, args.count // 4), shell, code, hull)
     twice = [statistics.median(run[k] for run in runs) for k in range(4)]
     collapsed = hugepages.collapse()
-    runs_huge = cells_twice(max(1, args.count // 4), shell,
-                            [c.source for c in book.cells if c.cell_type == "code"], hull)
+    runs_huge = cells_twice(max(1, args.count // 4), shell, code, hull)
     twice_huge = [statistics.median(run[k] for run in runs_huge) for k in range(4)]
     rows.append(("warm parent in huge pages", _rss_mib(), forks(args.count, lambda: None)))
     rows.append(("  child runs one cell", _rss_mib(), forks(
