@@ -7,7 +7,10 @@ transformer turns magics into Python, no kernel) and every collected check item 
 against that namespace through pytest's own per-item protocol, with the ``student``,
 ``credit``, ``rng`` and ``feedback`` fixtures reduced to direct calls. Nothing crosses
 a process, nothing is sandboxed, nothing is written: what is left is the student's code and
-the checks' own work, the least any grader must spend. Prints one JSON line:
+the checks' own work, the least any grader must spend. A check scores as in the engine: its
+points, the part a ``credit.partial`` gives, or nothing; the ``variant`` fixture gives the
+student's variant as the engine looks it up (the student's id is the folder above the
+notebook's, ``<id>/<assignment>/<notebook>.ipynb``). Prints one JSON line:
 the CPU and wall seconds of the per-notebook loop, each notebook's score, and each
 notebook's CPU seconds in its cells and in its checks. With ``--warm K`` the first
 ``K`` notebooks run once before the loop and are not counted (the first import of a
@@ -37,21 +40,33 @@ import pytest  # noqa: E402
 from _pytest.runner import runtestprotocol  # noqa: E402
 from IPython.core.inputtransformer2 import TransformerManager  # noqa: E402
 
-from autograder.engine.assignment import load_assignment  # noqa: E402
-from autograder.engine.plugin import Credit, check_name, item_points  # noqa: E402
+from autograder.engine.assignment import Assignment, load_assignment  # noqa: E402
+from autograder.engine.plugin import Credit, VariantView, check_name, item_points  # noqa: E402
+from autograder.errors import NoVariant, PartialCredit  # noqa: E402
 
 
 class _Feedback:
+    """The ``feedback`` fixture's calls, doing nothing (the floor writes nothing)."""
+
     def image(self, label: str, png: bytes) -> None:
+        pass
+
+    def input(self, text: str) -> None:
         pass
 
 
 class FloorPlugin:
     """Collects the check items once; runs them for each notebook in ``pytest_runtestloop``."""
 
-    def __init__(self, notebooks: list[Path], workdir: Path) -> None:
-        self.notebooks, self.workdir = notebooks, workdir
+    def __init__(self, notebooks: list[Path], assignment: Assignment) -> None:
+        self.notebooks, self.assignment = notebooks, assignment
+        self.workdir = assignment.root
         self.namespace: dict[str, Any] = {}
+        #: the id of the notebook being graded (the folder above its assignment's folder);
+        #: not ``self.student``, which is the fixture of that name
+        self.student_id = ""
+        #: the part of its points the item that just ran earned (1, a partial credit, or 0)
+        self.fraction = 0.0
         self.scores: list[float] = []
         self.cpu = self.wall = 0.0
         #: notebooks run first and not measured (``--warm K``)
@@ -85,12 +100,24 @@ class FloorPlugin:
     def feedback(self) -> _Feedback:
         return _Feedback()
 
+    @pytest.fixture
+    def variant(self) -> VariantView:
+        spec = self.assignment.variants
+        found = spec.lookup(self.assignment.name, self.student_id) if spec is not None else None
+        if found is None:  # the engine's verdict: a person grades it, 0 points here
+            raise NoVariant(f"{self.student_id!r} has no variant")
+        return VariantView(found)
+
     @pytest.hookimpl(tryfirst=True)
     def pytest_runtest_makereport(self, item: pytest.Item,
                                   call: pytest.CallInfo[None]) -> pytest.TestReport:
         # A bare report, as the engine's grading plugin makes one: the traceback of a
         # failing check is never formatted (it would cost the floor what no grader needs).
         failed = call.excinfo is not None
+        if call.when == "call":
+            value = call.excinfo.value if failed else None
+            self.fraction = 1.0 if not failed else \
+                value.fraction if isinstance(value, PartialCredit) else 0.0
         return pytest.TestReport(item.nodeid, item.location, {},
                                  "failed" if failed else "passed", "failed" if failed else None,
                                  call.when, duration=call.duration, start=call.start,
@@ -98,23 +125,24 @@ class FloorPlugin:
 
     def pytest_runtestloop(self, session: pytest.Session) -> bool:
         transform = TransformerManager().transform_cell
-        sources = [[transform(c.source) for c in nbformat.read(p, as_version=4).cells
-                    if c.cell_type == "code"] for p in self.notebooks]
+        sources = [(p.parent.parent.name, [transform(c.source) for c in
+                                           nbformat.read(p, as_version=4).cells
+                                           if c.cell_type == "code"]) for p in self.notebooks]
         os.chdir(self.workdir)
-        for cells in sources[:self.warm]:  # unmeasured: first imports of what the cells use
-            self._grade(cells, session)
+        for student, cells in sources[:self.warm]:  # unmeasured: first imports the cells need
+            self._grade(student, cells, session)
         for kept in (self.scores, self.cells_cpu, self.checks_cpu):
             kept.clear()
         cpu0, wall0 = time.process_time(), time.perf_counter()
-        for cells in sources[self.warm:]:
-            self._grade(cells, session)
+        for student, cells in sources[self.warm:]:
+            self._grade(student, cells, session)
         self.cpu, self.wall = time.process_time() - cpu0, time.perf_counter() - wall0
         return True
 
-    def _grade(self, cells: list[str], session: pytest.Session) -> None:
+    def _grade(self, student: str, cells: list[str], session: pytest.Session) -> None:
         """Run one notebook's cells, then every item; its score and CPU split are kept."""
         start = time.process_time()
-        self.namespace = {"__name__": "__main__"}
+        self.namespace, self.student_id = {"__name__": "__main__"}, student
         for code in cells:
             try:
                 exec(compile(code, "<cell>", "exec"), self.namespace)
@@ -124,9 +152,9 @@ class FloorPlugin:
         ran = time.process_time()
         score = 0.0
         for item in session.items:
-            reports = runtestprotocol(item, nextitem=None, log=False)
-            if all(r.passed for r in reports):
-                score += item_points(item)
+            self.fraction = 0.0  # stays 0 when the setup fails (a missing variant, say)
+            runtestprotocol(item, nextitem=None, log=False)
+            score += item_points(item) * self.fraction
         self.scores.append(score)
         self.cells_cpu.append(ran - start)
         self.checks_cpu.append(time.process_time() - ran)
@@ -145,7 +173,7 @@ def main(argv: list[str]) -> int:
     files = sorted((checks / "public").glob("test_*.py"))
     if not public_only:
         files += sorted((checks / "hidden").glob("test_*.py"))
-    plugin = FloorPlugin([Path(a).resolve() for a in args[1:]], assignment.root)
+    plugin = FloorPlugin([Path(a).resolve() for a in args[1:]], assignment)
     plugin.warm = warm
     sys.path.insert(0, str(checks / "public"))
     code = pytest.main([str(f) for f in files] + [

@@ -13,6 +13,8 @@ What it prints (each figure is one run over the batch, but for ``--pairs``):
   core), this engine ``--jobs 1`` and ``--jobs 2``, ``nbgrader autograde`` (its test
   cells) and ``otter run`` (the same test cells as OK tests), each with
   submissions/s, CPU per submission split into grader and worker, and every ratio;
+  whether the floor gave each submission the engine's score (a check the floor could
+  not run would fail at once and cost it nothing);
   then the floor's and the engine's CPU per submission beyond start-up, from a
   10-submission batch run beside it, and its ratio to the floor's;
 * a trivial assignment (one cell, one check) built in a temporary folder: the
@@ -75,6 +77,8 @@ class Run:
     worker_cpu: float
     first_result: float | None = None
     steady_rate: float | None = None
+    #: each submission's score, in the batch's order (the floor's; the engine writes files)
+    scores: tuple[float, ...] = ()
 
     @property
     def rate(self) -> float:
@@ -184,7 +188,38 @@ def run_floor(assignment: Path, notebooks: list[Path], public_only: bool, procs:
     shares = [notebooks[k * count // procs:(k + 1) * count // procs] for k in range(procs)]
     reports = floor_reports(assignment, shares, public_only)
     return Run("bare floor", len(notebooks), max(r["wall"] for r in reports),
-               sum(r["cpu"] for r in reports), 0.0)
+               sum(r["cpu"] for r in reports), 0.0,
+               scores=tuple(score for r in reports for score in r["scores"]))
+
+
+def compare_scores(section: str, floor: Run, notebooks: list[Path], out: Path) -> list[Figure]:
+    """Whether the floor gave each submission the engine's score (``out``: the engine's run).
+
+    The floor is a fair peer only while it does the checks' work as the engine does, and
+    the scores are how that shows: a check the floor cannot run (a fixture it lacks)
+    fails at once, costs it nothing, and loses its points. One difference is expected
+    and said: the engine refuses what the assignment forbids (the student's call
+    raises at once), and the floor has no forbidden list.
+    """
+    differ: list[tuple[str, float, float, bool]] = []
+    for notebook, floor_score in zip(notebooks, floor.scores):
+        student = notebook.parent.parent.name  # <id>/<assignment>/<notebook>.ipynb
+        result = json.loads((out / student / "results.json").read_text(encoding="utf-8"))
+        if abs(result["score"] - floor_score) > 1e-9:
+            errors = result.get("extra_data", {}).get("cell_errors", [])
+            forbidden = any(e.get("ename") == "NotAllowedError" for e in errors)
+            differ.append((student, floor_score, float(result["score"]), forbidden))
+    unexplained = [d for d in differ if not d[3]]
+    print(f"  scores: the floor and the engine agree on {len(notebooks) - len(differ)} of "
+          f"{len(notebooks)} submissions; {len(differ) - len(unexplained)} differ because the "
+          "engine refused a forbidden library (the floor has no forbidden list)"
+          + (f"; {len(unexplained)} differ otherwise: " + ", ".join(
+              f"{s} (floor {f:g}, engine {e:g})" for s, f, e, _ in unexplained[:5])
+             if unexplained else ""), flush=True)
+    return [Figure(f"{section}: scores, floor and engine agree", len(notebooks) - len(differ),
+                   "submissions", "the batch", len(notebooks)),
+            Figure(f"{section}: scores that differ, not for a forbidden library",
+                   len(unexplained), "submissions")]
 
 
 def floor_reports(assignment: Path, shares: list[list[Path]], public_only: bool = False,
@@ -597,6 +632,7 @@ def hull_runs(args: argparse.Namespace, work: Path, count: int) -> list[Figure]:
         elif peers:  # the peers run their test cells only: the same runs for both lines
             print("  (nbgrader and otter: the runs above)")
         section = f"hull, {'public checks' if public_only else 'every check'}"
+        figures += compare_scores(section, runs[0], notebooks, work / f"out-1-{public_only}")
         figures += run_figures(section, runs if public_only else runs + peers)
         figures += print_ratios(runs + peers, section)
         if count > SHORT:
