@@ -11,7 +11,7 @@ the checks' own work, the least any grader must spend. A check scores as in the 
 points, the part a ``credit.partial`` gives, or nothing; the ``variant`` fixture gives the
 student's variant as the engine looks it up (the student's id is the folder above the
 notebook's, ``<id>/<assignment>/<notebook>.ipynb``). Prints one JSON line:
-the CPU and wall seconds of the per-notebook loop, each notebook's score, and each
+the CPU and wall seconds of the per-notebook loop, each notebook's score, the best score, and each
 notebook's CPU seconds in its cells and in its checks. With ``--warm K`` the first
 ``K`` notebooks run once before the loop and are not counted (the first import of a
 library a notebook uses, which the engine's warm parent has already made).
@@ -68,6 +68,8 @@ class FloorPlugin:
         #: the part of its points the item that just ran earned (1, a partial credit, or 0)
         self.fraction = 0.0
         self.scores: list[float] = []
+        #: the points of every collected check (a notebook's best score)
+        self.max_score = 0.0
         self.cpu = self.wall = 0.0
         #: notebooks run first and not measured (``--warm K``)
         self.warm = 0
@@ -124,6 +126,7 @@ class FloorPlugin:
                                  stop=call.stop)
 
     def pytest_runtestloop(self, session: pytest.Session) -> bool:
+        self.max_score = sum(item_points(item) for item in session.items)
         transform = TransformerManager().transform_cell
         sources = [(p.parent.parent.name, [transform(c.source) for c in
                                            nbformat.read(p, as_version=4).cells
@@ -181,6 +184,7 @@ def main(argv: list[str]) -> int:
         "-p", "no:cacheprovider", "-p", "no:terminal", "--assert=plain",
         "--import-mode=importlib"], plugins=[plugin])
     print(json.dumps({"cpu": plugin.cpu, "wall": plugin.wall, "scores": plugin.scores,
+                      "max_score": plugin.max_score,
                       "cells_cpu": plugin.cells_cpu, "checks_cpu": plugin.checks_cpu,
                       "pytest_exit": int(code)}))
     return 0
