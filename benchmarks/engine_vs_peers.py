@@ -202,7 +202,9 @@ def compare_scores(section: str, floor: Run, notebooks: list[Path], out: Path) -
     raises at once), and the floor has no forbidden list.
     """
     differ: list[tuple[str, float, float, bool]] = []
-    for notebook, floor_score in zip(notebooks, floor.scores):
+    # strict: a floor that reported fewer scores than it was given notebooks must not
+    # pass as agreeing on the ones it left out
+    for notebook, floor_score in zip(notebooks, floor.scores, strict=True):
         student = notebook.parent.parent.name  # <id>/<assignment>/<notebook>.ipynb
         result = json.loads((out / student / "results.json").read_text(encoding="utf-8"))
         if abs(result["score"] - floor_score) > 1e-9:
