@@ -7,6 +7,7 @@ distributed one later) only has to call :meth:`Grader.grade` per file.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import importlib.util
@@ -464,24 +465,31 @@ class Grader:
     def _grade_notebook(self, notebook: Notebook, seed: int, out_dir: Path | None,
                         digest: str, *, name: str, runs_checks: bool) -> SubmissionResult:
         sources, numbers = [c.source for c in notebook.cells], [c.index for c in notebook.cells]
-        report = scan_sources(self.assignment.rules, sources)
-        forbidden = forbidden_functions(self.assignment.rules, sources, numbers, report)
         placed = place_cell_tests([(c.index, c.source, c.grade_id) for c in notebook.cells],
                                   self._cell_tests(name), end=notebook.end)
         session = self._session(placed, out_dir)
         runs_checks = runs_checks and bool(self.check_files)
-        # The checks are collected while a warm worker that is not running yet (the
-        # first submission, or after a crash) starts and imports its libraries.
-        self._slot.start(wait=False)
-        if runs_checks:
-            self._check_session(self._context(session, (), forbidden, seed, out_dir), digest)
         # This thread and the child take turns (a call waits for its answer): on the
         # slot's core, a message does not have to wake another core (autograder.sandbox.affinity).
-        with affinity.on_core(self._slot.core):
+        # With a warm parent ready, the child is forked first and enters its sandbox
+        # while this thread scans the notebook (session.launch). Otherwise (the first
+        # submission, or after a crash) the scan and the checks' session come first, off
+        # the slot's core, while the warm parent starts and imports its libraries there.
+        warm = self._slot.warm
+        with affinity.on_core(self._slot.core) if warm else contextlib.nullcontext():
             try:
-                run = session.start()
-                tests = (self._run_checks(session, run.functions, forbidden, seed, out_dir,
-                                          digest) if runs_checks else ())
+                if warm:
+                    session.launch()
+                report = scan_sources(self.assignment.rules, sources)
+                forbidden = forbidden_functions(self.assignment.rules, sources, numbers, report)
+                self._slot.start(wait=False)
+                if runs_checks:
+                    self._check_session(self._context(session, (), forbidden, seed, out_dir),
+                                        digest)
+                with affinity.on_core(self._slot.core):
+                    run = session.start()
+                    tests = (self._run_checks(session, run.functions, forbidden, seed, out_dir,
+                                              digest) if runs_checks else ())
             finally:
                 session.close()
         run = session.report or run  # as it stands after the calls (a protocol violation)

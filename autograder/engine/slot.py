@@ -201,6 +201,11 @@ class GradingSlot:
         if wait and not self._greeted:
             self._greet()
 
+    @property
+    def warm(self) -> bool:
+        """Whether the warm parent runs and said hello: a :meth:`spawn` now waits for no import."""
+        return self._greeted and self._proc is not None and self._proc.poll() is None
+
     def _launch(self) -> None:
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         env = {k: v for k, v in os.environ.items() if k in ("PATH", "LANG", "LC_ALL", "HOME")}
