@@ -28,7 +28,8 @@ nothing, as the answer is what the student's own code computed).
 A check may stop reading a batch early (its first failure ends it). The answers
 still in flight are then read before the next request (:meth:`Batch.drain`) and
 kept: a check that goes on reading gets them; what they say about the function
-(a time-out, a crash) counts against it only when a check reads it.
+(a time-out, a crash) counts against it only when a check reads it, and so does
+the restart of the worker such a call stopped (``MAX_CALL_RESTARTS``).
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ class Process(Protocol):
     """What a batch needs of :class:`~autograder.engine.student_process.StudentProcess`."""
 
     _batch: Batch | None
+    unread_stops: int
 
     def refusal(self, name: str, arguments: Any) -> NotRun | None: ...
     def note_failure(self, name: str, arguments: Any, error: StudentError, where: str) -> None: ...
@@ -107,6 +109,8 @@ class Batch:
     def __next__(self) -> Outcome:
         if self._kept:
             outcome = self._kept.popleft()
+            if outcome.failure is not None:  # read now: its worker's stop counts from here
+                self._process.unread_stops -= 1
         else:
             outcome = self._step()
         if outcome.failure is not None:
@@ -143,6 +147,8 @@ class Batch:
             if step is None:
                 return
             if step is not _IDLE:
+                if step.failure is not None:  # the call stopped the worker; not read yet
+                    self._process.unread_stops += 1
                 self._kept.append(step)
 
     def _advance(self) -> Any:

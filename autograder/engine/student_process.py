@@ -200,6 +200,10 @@ class StudentProcess:
     #: sent only when the worker reaches the cell (see :meth:`_give_source`)
     hidden_sources: dict[int, str] = field(default_factory=dict)
     restarts: int = 0
+    #: workers stopped by a call of a drained batch (see :meth:`Batch.drain`) that no
+    #: check has read yet: their restarts count against ``MAX_CALL_RESTARTS`` only
+    #: once a check reads the call, as the call's time-out or crash does
+    unread_stops: int = 0
     skip: dict[int, str] = field(default_factory=dict)
     #: per function: how often a call crashed the worker, and the last such error
     strikes: dict[str, tuple[int, StudentError]] = field(default_factory=dict)
@@ -608,7 +612,8 @@ class StudentProcess:
                          f"({self.cpu_budget:g} s of CPU) on earlier cells and calls.")
         if self._sock is not None:
             return
-        if self.report is None or self.report.crashed or self.restarts >= MAX_CALL_RESTARTS:
+        counted = self.restarts - self.unread_stops
+        if self.report is None or self.report.crashed or counted >= MAX_CALL_RESTARTS:
             if self.violation:
                 raise ProtocolViolation(f"{what} could not run: {self.violation}.")
             raise WorkerCrashed(

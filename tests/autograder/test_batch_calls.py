@@ -31,7 +31,7 @@ from autograder.engine import student_process
 from autograder.engine.proxy import CallLog, Student
 from autograder.engine.slot import GradingSlot
 from autograder.engine.student_process import NotebookRun, StudentProcess
-from autograder.errors import StudentError, UsageError
+from autograder.errors import CallTimeout, StudentError, UsageError, WorkerCrashed
 from autograder.sandbox.policy import IsolationPolicy
 from tests.support.peers import IdleClock, frame
 from tests.support.students import running
@@ -206,6 +206,28 @@ def test_a_check_that_stops_early_loses_nothing_and_charges_nothing(slot: Gradin
         assert "f" in process.timed_out  # charged now that a check read it
         with pytest.raises(StopIteration):
             next(results)
+
+
+def test_a_worker_stopped_by_a_call_no_check_read_costs_no_restart_until_read(
+        slot: GradingSlot, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(student_process, "MAX_CALL_RESTARTS", 1)
+    with running(slot, NOTEBOOK, timeout=0.5) as student:
+        process = process_of(student)
+        batches = []
+        for _ in range(2):  # two checks that stop reading before the call that spins
+            batches.append(student.map("f", [(1,), (7,)]))
+            assert next(batches[-1]) == 1
+            # the spinning call is drained before this one: it stops the worker, unread
+            assert student.f(10) == 10
+        assert process.restarts == 2 and process.unread_stops == 2
+        # read now: the time-outs count against the function, and their restarts too
+        for results in batches:
+            assert [kind for kind, _ in verdicts_of(results, 1)] == ["CallTimeout"]
+        assert process.unread_stops == 0
+        with pytest.raises(CallTimeout):
+            student.burn(2)  # stops the worker once more: now over the limit of one
+        with pytest.raises(WorkerCrashed, match="stopped earlier"):
+            student.how_many()
 
 
 def test_the_budget_ends_a_batch_as_it_ends_single_calls(slot: GradingSlot) -> None:
