@@ -10,7 +10,9 @@ warm worker and is not counted, and times each phase of every submission:
 
 * static scan: ``staticscan.scan`` of the cells (grader);
 * worker start/sandbox: from the request for a child until its "started" message
-  (grader, the warm parent's ``fork`` and the child entering the sandbox);
+  (grader, the warm parent's ``fork`` and the child entering the sandbox), less the
+  static scan, which runs meanwhile once the slot is warm (the child is forked ahead
+  of it, ``StudentProcess.launch``);
 * notebook run: from "started" to "ready" (the child running the cells);
 * pytest session and collection: the check run outside the check items. The
   grader keeps one pytest session (:class:`autograder.engine.checkrun.CheckSuite`),
@@ -181,8 +183,13 @@ def instrument(current: Callable[[], Probe], before: dict[str, types.ModuleType]
             old, old_wall = old_scan(sources, forbid)
         wall, cpu = time.perf_counter(), time.process_time()
         report = new_scan(sources, forbid)
-        new_wall = time.perf_counter() - wall
-        current().add("static scan", new_wall, time.process_time() - cpu)
+        new_wall, spent = time.perf_counter() - wall, time.process_time() - cpu
+        probe = current()
+        if probe.spawned is not None:  # the child, forked ahead, is entering its sandbox:
+            # the scan is its own phase, not part of the wait for "started"
+            start_wall, start_cpu, fork = probe.spawned
+            probe.spawned = (start_wall + new_wall, start_cpu + spent, fork)
+        probe.add("static scan", new_wall, spent)
         if before is not None:
             if not first:
                 old, old_wall = old_scan(sources, forbid)
